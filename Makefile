@@ -1,0 +1,32 @@
+# mobisense — set-up, demo and tests. Every target creates .venv if missing and installs into it.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+
+.PHONY: demo test lint bench clean
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+
+$(STAMP): pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet -e ".[test]"
+	$(BIN)/python -m ipykernel install --sys-prefix --name python3 >/dev/null
+	touch $(STAMP)
+
+demo: $(STAMP)  ## solve the default problem (problems/hussein2008.yaml) into out/hussein2008/
+	$(BIN)/mobisense solve problems/hussein2008.yaml --out out/hussein2008
+
+test: $(STAMP)  ## ruff + the whole test suite (tests and notebooks)
+	$(BIN)/ruff check .
+	$(BIN)/python -m pytest
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+
+bench: $(STAMP)  ## performance ratios, measured in one run (not part of the tests)
+	$(BIN)/python benchmarks/bench_direct.py
+
+clean:
+	rm -rf out .pytest_cache
