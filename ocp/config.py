@@ -20,6 +20,7 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, ValidationError
 
 __all__ = [
     "ConfigError",
+    "InvalidValue",
     "StrictModel",
     "FiniteFloat",
     "PositiveFloat",
@@ -38,6 +39,15 @@ __all__ = [
 
 class ConfigError(ValueError):
     """A configuration file (or dict) is invalid; ``str(err)`` is a one-line user-facing message."""
+
+
+class InvalidValue(ValueError):
+    """Raised by cross-field validators: ``path`` is relative to the model raising it (``"Sigma0"``)."""
+
+    def __init__(self, path: str, message: str) -> None:
+        super().__init__(f"{path}: {message}")
+        self.path = path
+        self.message = message
 
 
 class StrictModel(BaseModel):
@@ -87,7 +97,7 @@ def check_shape(name: str, value: list[list[float]], shape: tuple[int, int]) -> 
     """Return ``value`` as an array, raising ``ValueError`` unless its shape is ``shape``."""
     arr = np.asarray(value, dtype=float)
     if arr.shape != shape:
-        raise ValueError(f"{name}: expected shape {shape[0]}x{shape[1]}, got {arr.shape[0]}x{arr.shape[1]}")
+        raise InvalidValue(name, f"expected shape {shape[0]}x{shape[1]}, got {arr.shape[0]}x{arr.shape[1]}")
     return arr
 
 
@@ -95,13 +105,13 @@ def check_square(name: str, value: list[list[float]]) -> np.ndarray:
     """Return ``value`` as an array, raising ``ValueError`` unless it is square."""
     arr = np.asarray(value, dtype=float)
     if arr.shape[0] != arr.shape[1]:
-        raise ValueError(f"{name}: expected a square matrix, got {arr.shape[0]}x{arr.shape[1]}")
+        raise InvalidValue(name, f"expected a square matrix, got {arr.shape[0]}x{arr.shape[1]}")
     return arr
 
 
 def _check_symmetric(name: str, arr: np.ndarray) -> None:
     if not np.allclose(arr, arr.T, rtol=1e-12, atol=1e-12 * max(1.0, float(np.abs(arr).max()))):
-        raise ValueError(f"{name}: expected a symmetric matrix, got {arr.tolist()}")
+        raise InvalidValue(name, f"expected a symmetric matrix, got {arr.tolist()}")
 
 
 def check_spd(name: str, arr: np.ndarray) -> np.ndarray:
@@ -109,7 +119,7 @@ def check_spd(name: str, arr: np.ndarray) -> np.ndarray:
     _check_symmetric(name, arr)
     lam_min = float(np.linalg.eigvalsh(arr).min())
     if lam_min <= 0:
-        raise ValueError(f"{name}: expected a symmetric positive definite matrix, smallest eigenvalue {lam_min:g}")
+        raise InvalidValue(name, f"expected a symmetric positive definite matrix, smallest eigenvalue {lam_min:g}")
     return arr
 
 
@@ -118,9 +128,7 @@ def check_psd(name: str, arr: np.ndarray) -> np.ndarray:
     _check_symmetric(name, arr)
     lam_min = float(np.linalg.eigvalsh(arr).min())
     if lam_min < -1e-12 * max(1.0, float(np.abs(arr).max())):
-        raise ValueError(
-            f"{name}: expected a symmetric positive semidefinite matrix, smallest eigenvalue {lam_min:g}"
-        )
+        raise InvalidValue(name, f"expected a symmetric positive semidefinite matrix, smallest eigenvalue {lam_min:g}")
     return arr
 
 
@@ -174,10 +182,16 @@ def _describe(error: dict[str, Any], model: type[BaseModel]) -> str:
         return f"{path}: unknown key{suggestion}{listing}"
     if kind == "missing":
         return f"{path}: required key is missing"
+    cause = (error.get("ctx") or {}).get("error")
+    if isinstance(cause, InvalidValue):
+        prefix = format_location(loc) if loc else ""
+        return f"{prefix + '.' if prefix else ''}{cause.path}: {cause.message}"
     message = error["msg"]
     for prefix in ("Value error, ", "Assertion failed, "):
         if message.startswith(prefix):
-            message = message[len(prefix):]
+            message = message[len(prefix) :]
+    if message.startswith("Input should be "):
+        message = "expected " + message[len("Input should be ") :]
     got = error.get("input")
     got_text = "" if kind.startswith("value_error") or isinstance(got, dict) else f" (got {got!r})"
     return f"{path}: {message}{got_text}"

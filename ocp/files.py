@@ -62,7 +62,7 @@ def write_json(path: str | Path, data: dict[str, Any]) -> None:
 def write_netcdf(path: str | Path, dataset: Any) -> None:
     """Write an ``xarray.Dataset`` with the h5netcdf engine, atomically."""
     with atomic_path(path) as tmp:
-        dataset.to_netcdf(tmp, engine="h5netcdf")
+        dataset.to_netcdf(tmp, mode="w", engine="h5netcdf")
 
 
 def write_figure(path: str | Path, draw: Callable[[], Any]) -> None:

@@ -1,5 +1,7 @@
-"""Execute every notebook in notebooks/ (committed without outputs) from notebooks/ as working directory; any cell error fails
-the test. Notebooks write their outputs to a temporary folder, never into the repository."""
+"""Execute every notebook in notebooks/ (committed without outputs), with notebooks/ as working directory.
+
+Any cell error fails the test. Notebooks write their outputs to a temporary folder, never into the repository.
+"""
 
 from __future__ import annotations
 

@@ -1,0 +1,91 @@
+"""Orthogonal collocation schemes on the unit interval: points, differentiation, continuity, quadrature.
+
+A scheme of degree d has nodes ``tau = [0, tau_1, …, tau_d]`` (from ``casadi.collocation_points``).
+With the Lagrange basis l_j over all d+1 nodes, the collocation equations of one interval of length h are
+
+    sum_j D[j, r] x_j = h f(x_r, u_r),  r = 1..d        (D[j, r] = l_j'(tau_r))
+
+the interval's end state is ``x_end = sum_j E[j] x_j`` (E[j] = l_j(1)), and integrals use the Gauss-type
+quadrature ``∫_0^1 g ≈ sum_r W[r] g(tau_r)`` whose weights integrate the d-point basis on the
+collocation nodes (exact to degree 2d−2 for Radau, 2d−1 for Legendre). With controls at the
+collocation points the cost converges at order 2d−1 (Radau) and 2d (Legendre).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+__all__ = ["CollocationScheme", "SCHEMES"]
+
+#: scheme name -> (CasADi point set, superconvergence order of the cost as a function of degree d)
+SCHEMES: dict[str, tuple[str, str]] = {
+    "radau": ("radau", "2d-1"),
+    "legendre": ("legendre", "2d"),
+}
+
+
+@dataclass(frozen=True)
+class CollocationScheme:
+    """Collocation matrices for ``scheme`` (``radau`` | ``legendre``) of degree ``degree``."""
+
+    scheme: str
+    degree: int
+    tau: np.ndarray = field(init=False)  # (d+1,) nodes incl. 0
+    D: np.ndarray = field(init=False)  # (d+1, d) derivative of basis j at collocation node r
+    E: np.ndarray = field(init=False)  # (d+1,) basis at tau = 1 (end of interval)
+    W: np.ndarray = field(init=False)  # (d,) quadrature weights on the collocation nodes
+
+    def __post_init__(self) -> None:
+        if self.scheme not in SCHEMES:
+            raise ValueError(f"unknown collocation scheme {self.scheme!r}; expected one of {sorted(SCHEMES)}")
+        d = self.degree
+        tau = np.append(0.0, ca.collocation_points(d, SCHEMES[self.scheme][0]))
+        D = np.zeros((d + 1, d))
+        E = np.zeros(d + 1)
+        for j in range(d + 1):
+            basis = np.poly1d([1.0])
+            for r in range(d + 1):
+                if r != j:
+                    basis *= np.poly1d([1.0, -tau[r]]) / (tau[j] - tau[r])
+            E[j] = basis(1.0)
+            D[j, :] = np.polyder(basis)(tau[1:])
+        W = np.zeros(d)
+        for j in range(d):
+            basis = np.poly1d([1.0])
+            for r in range(d):
+                if r != j:
+                    basis *= np.poly1d([1.0, -tau[r + 1]]) / (tau[j + 1] - tau[r + 1])
+            antiderivative = np.polyint(basis)
+            W[j] = antiderivative(1.0) - antiderivative(0.0)
+        object.__setattr__(self, "tau", tau)
+        object.__setattr__(self, "D", D)
+        object.__setattr__(self, "E", E)
+        object.__setattr__(self, "W", W)
+
+    @property
+    def order(self) -> int:
+        """Order of convergence of the cost with per-point controls (2d−1 Radau, 2d Legendre)."""
+        return 2 * self.degree - 1 if self.scheme == "radau" else 2 * self.degree
+
+    @property
+    def ends_at_node(self) -> bool:
+        """True when the last collocation node is the interval end (Radau)."""
+        return bool(abs(self.tau[-1] - 1.0) < 1e-14)
+
+    def interpolation_matrix(self, s: np.ndarray, nodes: str = "collocation") -> np.ndarray:
+        """Lagrange interpolation weights at local times ``s`` in [0, 1].
+
+        ``nodes="collocation"`` uses the d collocation nodes (controls), ``"all"`` the d+1 state nodes.
+        Returns shape (len(s), number of nodes).
+        """
+        points = self.tau[1:] if nodes == "collocation" else self.tau
+        s = np.atleast_1d(np.asarray(s, float))
+        out = np.ones((s.size, points.size))
+        for j in range(points.size):
+            for r in range(points.size):
+                if r != j:
+                    out[:, j] *= (s - points[r]) / (points[j] - points[r])
+        return out

@@ -1,0 +1,214 @@
+"""Solve the mobile-sensor Kalman problem by direct collocation with ε-continuation (SPEC §1.3).
+
+``solve_direct(problem)`` builds (or reuses) the transcription for the problem's structure and grid,
+starts from the ε → 0 limit (coasting sensors, Σ from the Riccati IVP), continues in ε with primal and
+dual warm starts, and returns a :class:`~ocp.solution.Solution` — complete, or up to the last ε
+solved with ``status="failed"`` and the worst-violated constraint named in problem terms.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+
+from ocp.homotopy import run_continuation
+from ocp.model import Structure, vec_to_sym
+from ocp.problem import Problem
+from ocp.simulate import Trajectory, integrate
+from ocp.solution import HomotopyStep, Solution
+from ocp.transcription import DirectCollocation, NLPResult
+
+__all__ = ["solve_direct", "transcription_for", "coasting_baseline"]
+
+
+@lru_cache(maxsize=16)
+def _cached_transcription(
+    structure: Structure, scheme: str, degree: int, intervals: int, tolerance: float, max_iterations: int
+) -> DirectCollocation:
+    return DirectCollocation(structure, scheme, degree, intervals, tolerance=tolerance, max_iterations=max_iterations)
+
+
+def transcription_for(problem: Problem) -> DirectCollocation:
+    """The (cached) transcription for ``problem``'s structure and solver options."""
+    opts = problem.solver
+    c = opts.collocation
+    return _cached_transcription(
+        Structure.of(problem), c.scheme, c.degree, c.intervals, opts.tolerance, opts.max_iterations
+    )
+
+
+def _state_grid(tr: DirectCollocation, t0: float, tf: float) -> tuple[np.ndarray, np.ndarray]:
+    """Merged state time grid (interval starts and collocation nodes, no duplicates) and its sort order."""
+    starts, nodes = tr.times(t0, tf)
+    t_all = np.concatenate([starts, nodes.ravel()])
+    order = np.argsort(t_all, kind="stable")
+    keep = np.concatenate([[True], np.diff(t_all[order]) > 1e-12 * max(1.0, abs(tf - t0))])
+    return t_all[order][keep], order[keep]
+
+
+def coasting_baseline(problem: Problem, t_eval: np.ndarray, tr: DirectCollocation | None = None) -> Trajectory:
+    """The ε → 0 solution: sensors coast (u ≡ 0), Σ from the Riccati IVP — the classical Kalman filter."""
+    tr = tr or transcription_for(problem)
+    P = tr.layout.pack(tr.layout.values(problem))
+    return integrate(tr.model, P, t_eval)
+
+
+def _initial_guess(tr: DirectCollocation, coasting: Trajectory, P: np.ndarray) -> np.ndarray:
+    """Decision vector of the coasting trajectory (states at every start and node, u = 0)."""
+    K, d = tr.intervals, tr.colloc.degree
+    starts, nodes = tr.times(coasting.t[0], coasting.t[-1])
+    t_all = np.concatenate([starts, nodes.ravel()])
+    tol = 1e-9 * max(1.0, abs(coasting.t[-1] - coasting.t[0]))
+    x_all = coasting.x[np.clip(np.searchsorted(coasting.t, t_all - tol), 0, len(coasting.t) - 1)]
+    u = np.zeros((K, d, tr.structure.nu))
+    return tr.pack(x_all[: K + 1], x_all[K + 1 :].reshape(K, d, -1), u, P)
+
+
+def _worst_violation(tr: DirectCollocation, result: NLPResult, problem: Problem) -> dict[str, Any]:
+    _, _, lbg, ubg = tr.bounds()
+    violation = np.maximum(np.maximum(lbg - result.g, result.g - ubg), 0.0)
+    index = int(np.argmax(violation))
+    labels = tr.constraint_labels([s.name for s in problem.sensors], problem.horizon.t0, problem.horizon.tf)
+    what, when = labels[index]
+    return {"constraint": what, "time": when, "violation": float(violation[index])}
+
+
+def solve_direct(
+    problem: Problem,
+    progress: Callable[[HomotopyStep], None] | None = None,
+    transcription: DirectCollocation | None = None,
+) -> Solution:
+    """Solve ``problem`` by direct collocation with the ε-homotopy of its solver options.
+
+    Parameters
+    ----------
+    problem : Problem
+    progress : callable, optional
+        Called with each :class:`HomotopyStep` as soon as it finishes (for progress displays).
+    transcription : DirectCollocation, optional
+        A prebuilt transcription of the same structure (default: cached per structure and grid).
+
+    Returns
+    -------
+    Solution
+        ``status`` is ``"solved"`` when ε = 1 converged, else ``"failed"`` with what was solved.
+    """
+    t_start = time.perf_counter()
+    tr = transcription or transcription_for(problem)
+    t0, tf = problem.horizon.t0, problem.horizon.tf
+    layout = tr.layout
+    values = layout.values(problem)
+    t_grid, order = _state_grid(tr, t0, tf)
+    P_base = layout.pack(values)
+    coasting = integrate(tr.model, P_base, t_grid)
+    values["cost_scale"] = max(abs(coasting.cost), 1e-8)
+    w0 = _initial_guess(tr, coasting, layout.pack(values))
+
+    state: dict[str, Any] = {"w": w0, "lam_w": None, "lam_g": None, "result": None, "eps": 0.0, "failed": None}
+    steps: list[HomotopyStep] = []
+    path: list[tuple[float, np.ndarray]] = []
+
+    def attempt(eps: float) -> bool:
+        P = layout.pack({**values, "eps": eps})
+        result = tr.solve(P, state["w"], state["lam_w"], state["lam_g"])
+        phi, running, _ = (float(v) for v in tr.cost_terms(result.w, P))
+        step = HomotopyStep(eps, phi + running / eps, result.iterations, result.status, result.time_s, result.success)
+        steps.append(step)
+        if progress is not None:
+            progress(step)
+        if result.success:
+            state.update(w=result.w, lam_w=result.lam_w, lam_g=result.lam_g, result=result, eps=eps)
+            path.append((eps, result.w))
+        else:
+            state["failed"] = (result, P)
+        return result.success
+
+    eps_reached = run_continuation(attempt, problem.solver.homotopy)
+    solved = eps_reached == 1.0
+    message = "converged at ε = 1"
+    stats: dict[str, Any] = {"build_time_s": tr.build_time_s, "nlp_variables": tr.nw, "nlp_constraints": tr.ng}
+    if not solved:
+        failed_result, failed_P = state["failed"]
+        worst = _worst_violation(tr, failed_result, problem)
+        stats["worst_violation"] = worst
+        message = (
+            f"Ipopt returned {failed_result.status} at ε = {steps[-1].eps:g}; last ε solved = {eps_reached:g}; "
+            f"worst-violated constraint: {worst['constraint']} at t = {worst['time']:.4g} "
+            f"(violation {worst['violation']:.3g})"
+        )
+    stats["total_time_s"] = time.perf_counter() - t_start
+    return _assemble(problem, tr, values, state, steps, path, coasting, t_grid, order, solved, message, stats)
+
+
+def _assemble(
+    problem: Problem,
+    tr: DirectCollocation,
+    values: dict[str, Any],
+    state: dict[str, Any],
+    steps: list[HomotopyStep],
+    path: list[tuple[float, np.ndarray]],
+    coasting: Trajectory,
+    t_grid: np.ndarray,
+    order: np.ndarray,
+    solved: bool,
+    message: str,
+    stats: dict[str, Any],
+) -> Solution:
+    s = tr.structure
+    n, N = s.n, s.N
+    eps = state["eps"]
+    P = tr.layout.pack({**values, "eps": max(eps, 1e-300)})
+    P1 = tr.layout.pack({**values, "eps": 1.0})
+
+    def on_grid(w: np.ndarray) -> np.ndarray:
+        parts = tr.unpack(w, P)
+        x_all = np.concatenate([parts["xs"], parts["xc"].reshape(-1, s.nx)])
+        return x_all[order]
+
+    x = on_grid(state["w"])
+    parts = tr.unpack(state["w"], P)
+    _, nodes = tr.times(problem.horizon.t0, problem.horizon.tf)
+    phi, running, energy = (float(v) for v in tr.cost_terms(state["w"], P1))
+    solution = Solution(
+        problem=problem,
+        method="direct",
+        status="solved" if solved else "failed",
+        message=message,
+        eps=eps,
+        t=t_grid,
+        Sigma=vec_to_sym(x[:, : s.n_sigma], n),
+        p=x[:, s.n_sigma : s.n_sigma + 2 * N].reshape(-1, N, 2),
+        v=x[:, s.n_sigma + 2 * N :].reshape(-1, N, 2),
+        t_u=nodes.ravel(),
+        u=parts["u"].reshape(-1, N, 2),
+        terminal_cost=phi,
+        running_cost=running,
+        control_energy=energy,
+        homotopy=steps,
+        baseline={
+            "cost": coasting.cost,
+            "terminal_cost": coasting.terminal_cost,
+            "running_cost": coasting.running_cost,
+        },
+        stats=stats,
+    )
+    if state["result"] is not None:
+        lam = tr.costates(state["result"], P)
+        lam_sigma = lam[:, : s.n_sigma].copy()
+        Lam = vec_to_sym(lam_sigma, n)
+        off = ~np.eye(n, dtype=bool)
+        Lam[:, off] *= 0.5  # off-diagonal σ_ij stands for Σ_ij and Σ_ji: λ_σij = 2 Λ_ij
+        solution.t_costate = np.concatenate([[problem.horizon.t0], nodes.ravel()])
+        solution.Lam = Lam
+        solution.lam_p = lam[:, s.n_sigma : s.n_sigma + 2 * N].reshape(-1, N, 2)
+        solution.lam_v = lam[:, s.n_sigma + 2 * N :].reshape(-1, N, 2)
+    if path:
+        grids = [on_grid(w) for _, w in path]
+        solution.path_eps = np.array([e for e, _ in path])
+        solution.path_p = np.stack([g[:, s.n_sigma : s.n_sigma + 2 * N].reshape(-1, N, 2) for g in grids])
+        solution.path_Sigma = np.stack([vec_to_sym(g[:, : s.n_sigma], n) for g in grids])
+    return solution

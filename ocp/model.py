@@ -1,0 +1,315 @@
+"""Symbolic model of the mobile-sensor Kalman problem (SPEC §1.1): one implementation of each equation.
+
+State vector ``x = [σ, p_1, …, p_N, v_1, …, v_N]`` with ``σ`` the upper triangle of Σ (row-major,
+n(n+1)/2 entries), positions p_i (L) and velocities v_i (L/T); controls ``u = [u_1, …, u_N]`` (L/T²).
+Every number of the problem (ε, weights, matrices, initial and terminal data, noise parameters,
+scales) is a symbolic NLP parameter laid out by :class:`ParameterLayout`, so one CasADi graph serves
+every problem of the same :class:`Structure`; only the structure triggers a rebuild.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from ocp.noise_models import NOISE_MODELS
+from ocp.problem import Problem
+
+__all__ = [
+    "Structure",
+    "ParameterLayout",
+    "SensorKalmanModel",
+    "sym_to_vec",
+    "vec_to_sym",
+    "triangle_labels",
+    "diagonal_indices",
+]
+
+
+# ---------------------------------------------------------------------- symmetric parametrisation
+def _triangle(n: int) -> list[tuple[int, int]]:
+    return [(i, j) for i in range(n) for j in range(i, n)]
+
+
+def diagonal_indices(n: int) -> list[int]:
+    """Positions of the diagonal entries Σ[i,i] in the upper-triangle vector."""
+    return [k for k, (i, j) in enumerate(_triangle(n)) if i == j]
+
+
+def triangle_labels(n: int) -> list[str]:
+    """Names of the upper-triangle entries, ``['Σ[0,0]', 'Σ[0,1]', …]``."""
+    return [f"Σ[{i},{j}]" for i, j in _triangle(n)]
+
+
+def sym_to_vec(S: Any, n: int) -> Any:
+    """Upper triangle (row-major) of a symmetric n×n matrix (numpy or CasADi) as a vector."""
+    entries = [S[i, j] for i, j in _triangle(n)]
+    if isinstance(S, np.ndarray):
+        return np.array(entries)
+    return ca.vertcat(*entries)
+
+
+def vec_to_sym(s: Any, n: int) -> Any:
+    """Symmetric n×n matrix from its upper-triangle vector (numpy ``(..., k)`` or CasADi column)."""
+    if isinstance(s, np.ndarray):
+        out = np.zeros(s.shape[:-1] + (n, n))
+        for k, (i, j) in enumerate(_triangle(n)):
+            out[..., i, j] = s[..., k]
+            out[..., j, i] = s[..., k]
+        return out
+    rows = [[None] * n for _ in range(n)]
+    for k, (i, j) in enumerate(_triangle(n)):
+        rows[i][j] = s[k]
+        rows[j][i] = s[k]
+    return ca.vertcat(*[ca.horzcat(*row) for row in rows])
+
+
+# ---------------------------------------------------------------------- structure and parameters
+@dataclass(frozen=True)
+class Structure:
+    """What fixes the shape of the CasADi graph (everything else is a parameter)."""
+
+    n: int
+    rows: tuple[int, ...]  # measurement rows m_i per sensor
+    noise_models: tuple[str, ...]
+    fixed_position: tuple[bool, ...]
+    fixed_velocity: tuple[bool, ...]
+    bounded_control: tuple[bool, ...]
+
+    @classmethod
+    def of(cls, problem: Problem) -> Structure:
+        """The structure of ``problem``."""
+        sensors = problem.sensors
+        return cls(
+            n=problem.n,
+            rows=tuple(problem.measurement_rows(i).shape[0] for i in range(problem.N)),
+            noise_models=tuple(s.noise.model for s in sensors),
+            fixed_position=tuple(s.terminal is not None and s.terminal.p is not None for s in sensors),
+            fixed_velocity=tuple(s.terminal is not None and s.terminal.v is not None for s in sensors),
+            bounded_control=tuple(s.u_max is not None for s in sensors),
+        )
+
+    @property
+    def N(self) -> int:  # noqa: N802
+        """Number of sensors."""
+        return len(self.rows)
+
+    @property
+    def n_sigma(self) -> int:
+        """Number of covariance states n(n+1)/2."""
+        return self.n * (self.n + 1) // 2
+
+    @property
+    def nx(self) -> int:
+        """State dimension n(n+1)/2 + 4N."""
+        return self.n_sigma + 4 * self.N
+
+    @property
+    def nu(self) -> int:
+        """Control dimension 2N."""
+        return 2 * self.N
+
+    def state_labels(self, sensor_names: list[str]) -> list[str]:
+        """Readable name of every state component (used to report violated constraints)."""
+        labels = triangle_labels(self.n)
+        labels += [f"sensor {name} position {c}" for name in sensor_names for c in "xy"]
+        labels += [f"sensor {name} velocity {c}" for name in sensor_names for c in "xy"]
+        return labels
+
+
+class ParameterLayout:
+    """Ordered named blocks of the NLP parameter vector; packs numbers and unpacks symbols."""
+
+    def __init__(self, structure: Structure) -> None:
+        s = structure
+        n = s.n
+        blocks: list[tuple[str, tuple[int, ...]]] = [
+            ("eps", (1,)),
+            ("t0", (1,)),
+            ("tf", (1,)),
+            ("alpha", (1,)),
+            ("A", (n, n)),
+            ("BQB", (n, n)),
+            ("M", (n, n)),
+            ("K", (n, n)),
+            ("Sigma0", (n, n)),
+            ("sigma_scale", (n, n)),
+            ("length_scale", (1,)),
+            ("velocity_scale", (1,)),
+            ("control_scale", (1,)),
+            ("cost_scale", (1,)),
+        ]
+        for i in range(s.N):
+            model = NOISE_MODELS[s.noise_models[i]]
+            blocks += [
+                (f"p0_{i}", (2,)),
+                (f"v0_{i}", (2,)),
+                (f"C_{i}", (s.rows[i], n)),
+                (f"rowloc_{i}", (s.rows[i], 2)),
+                (f"theta_{i}", (model.n_parameters,)),
+            ]
+            if s.fixed_position[i]:
+                blocks.append((f"pT_{i}", (2,)))
+            if s.fixed_velocity[i]:
+                blocks.append((f"vT_{i}", (2,)))
+            if s.bounded_control[i]:
+                blocks.append((f"umax_{i}", (1,)))
+        self.blocks = blocks
+        self.offsets: dict[str, tuple[int, tuple[int, ...]]] = {}
+        offset = 0
+        for name, shape in blocks:
+            self.offsets[name] = (offset, shape)
+            offset += int(np.prod(shape))
+        self.size = offset
+
+    def pack(self, values: dict[str, Any]) -> np.ndarray:
+        """Numeric parameter vector from a dict with one entry per block (row-major matrices)."""
+        out = np.empty(self.size)
+        for name, (offset, shape) in self.offsets.items():
+            arr = np.asarray(values[name], dtype=float).reshape(-1)
+            if arr.size != int(np.prod(shape)):
+                raise ValueError(f"parameter block {name}: expected {int(np.prod(shape))} values, got {arr.size}")
+            out[offset : offset + arr.size] = arr
+        return out
+
+    def unpack(self, P: Any) -> dict[str, Any]:
+        """Symbolic (or numeric) blocks of a parameter vector; matrices reshaped row-major."""
+        out: dict[str, Any] = {}
+        for name, (offset, shape) in self.offsets.items():
+            size = int(np.prod(shape))
+            block = P[offset : offset + size]
+            if len(shape) == 2:
+                block = (
+                    ca.reshape(block, shape[1], shape[0]).T if not isinstance(P, np.ndarray) else block.reshape(shape)
+                )
+            out[name] = block
+        return out
+
+    def values(self, problem: Problem, eps: float = 1.0) -> dict[str, Any]:
+        """All blocks' numbers for ``problem`` at homotopy parameter ``eps`` (scales chosen here)."""
+        mats = problem.matrices()
+        d = np.sqrt(np.diag(mats["Sigma0"]))
+        length = max(
+            1.0,
+            *(np.linalg.norm(np.asarray(s.p0) - loc) for s in problem.sensors for loc in mats["locations"]),
+        )
+        horizon = problem.horizon.tf - problem.horizon.t0
+        velocity = max(length / horizon, *(np.linalg.norm(s.v0) for s in problem.sensors))
+        values: dict[str, Any] = {
+            "eps": eps,
+            "t0": problem.horizon.t0,
+            "tf": problem.horizon.tf,
+            "alpha": problem.cost.alpha,
+            "A": mats["A"],
+            "BQB": mats["BQB"],
+            "M": mats["M"],
+            "K": mats["K"],
+            "Sigma0": mats["Sigma0"],
+            "sigma_scale": np.outer(d, d),
+            "length_scale": length,
+            "velocity_scale": velocity,
+            "control_scale": velocity / horizon,
+            "cost_scale": 1.0,
+        }
+        for i, sensor in enumerate(problem.sensors):
+            values[f"p0_{i}"] = sensor.p0
+            values[f"v0_{i}"] = sensor.v0
+            values[f"C_{i}"] = problem.measurement_rows(i)
+            values[f"rowloc_{i}"] = problem.row_locations(i)
+            values[f"theta_{i}"] = sensor.noise.parameters()
+            if sensor.terminal is not None and sensor.terminal.p is not None:
+                values[f"pT_{i}"] = sensor.terminal.p
+            if sensor.terminal is not None and sensor.terminal.v is not None:
+                values[f"vT_{i}"] = sensor.terminal.v
+            if sensor.u_max is not None:
+                values[f"umax_{i}"] = sensor.u_max
+        return values
+
+
+# ---------------------------------------------------------------------- the model
+class SensorKalmanModel:
+    """CasADi SX functions of the problem for one :class:`Structure`.
+
+    Functions (unscaled variables; ``P`` the parameter vector):
+      ``f(x, u, P)`` state derivative; ``running(x, u, P)`` -> [α/2|u|² + Tr KΣ, α/2|u|²];
+      ``terminal(x, P)`` -> Tr[M Σ]; ``x0(P)`` initial state; ``scales(P)`` -> (state scale (nx,),
+      control scale (nu,)); ``information(p, P)`` -> S(p) = C' R(p)^-1 C flattened (n*n,).
+    """
+
+    def __init__(self, structure: Structure) -> None:
+        self.structure = s = structure
+        self.layout = ParameterLayout(structure)
+        x = ca.SX.sym("x", s.nx)
+        u = ca.SX.sym("u", s.nu)
+        P = ca.SX.sym("P", self.layout.size)
+        b = self.layout.unpack(P)
+        n, N = s.n, s.N
+        Sigma = vec_to_sym(x[: s.n_sigma], n)
+        pos = [x[s.n_sigma + 2 * i : s.n_sigma + 2 * i + 2] for i in range(N)]
+        vel = [x[s.n_sigma + 2 * N + 2 * i : s.n_sigma + 2 * N + 2 * i + 2] for i in range(N)]
+        S = self._information(pos, b)
+        # SPEC §1.1: Σ' = A Σ + Σ A' + B Q B' − Σ C' R(p)^-1 C Σ
+        Sigma_dot = b["A"] @ Sigma + Sigma @ b["A"].T + b["BQB"] - Sigma @ S @ Sigma
+        xdot = ca.vertcat(sym_to_vec(Sigma_dot, n), *vel, u)
+        energy = 0.5 * b["alpha"] * ca.sumsqr(u)
+        self.f = ca.Function("f", [x, u, P], [xdot], ["x", "u", "P"], ["xdot"])
+        self.running = ca.Function(
+            "running", [x, u, P], [ca.vertcat(energy + ca.trace(b["K"] @ Sigma), energy)], ["x", "u", "P"], ["L"]
+        )
+        self.terminal = ca.Function("terminal", [x, P], [ca.trace(b["M"] @ Sigma)], ["x", "P"], ["Phi"])
+        x0 = ca.vertcat(
+            sym_to_vec(b["Sigma0"], n), *[b[f"p0_{i}"] for i in range(N)], *[b[f"v0_{i}"] for i in range(N)]
+        )
+        self.x0 = ca.Function("x0", [P], [x0], ["P"], ["x0"])
+        sigma_scale = sym_to_vec(b["sigma_scale"], n)
+        x_scale = ca.vertcat(
+            sigma_scale, ca.repmat(b["length_scale"], 2 * N, 1), ca.repmat(b["velocity_scale"], 2 * N, 1)
+        )
+        self.scales = ca.Function(
+            "scales", [P], [x_scale, ca.repmat(b["control_scale"], s.nu, 1)], ["P"], ["x_scale", "u_scale"]
+        )
+        p_sym = ca.SX.sym("p", 2 * N)
+        S_p = self._information([p_sym[2 * i : 2 * i + 2] for i in range(N)], b)
+        self.information = ca.Function("information", [p_sym, P], [ca.reshape(S_p, n * n, 1)], ["p", "P"], ["S"])
+
+    def _information(self, positions: list[Any], b: dict[str, Any]) -> Any:
+        """S(p) = Σ_i C_i' diag(1/r_i(p_i)) C_i  (SPEC §1.1 with R block-diagonal)."""
+        s = self.structure
+        S = ca.SX.zeros(s.n, s.n)
+        for i in range(s.N):
+            model = NOISE_MODELS[s.noise_models[i]]
+            C = b[f"C_{i}"]
+            for k in range(s.rows[i]):
+                r = model.variance(positions[i], b[f"rowloc_{i}"][k, :].T, b[f"theta_{i}"])
+                S += C[k, :].T @ C[k, :] / r
+        return S
+
+    def terminal_constraints(self, x: Any, P: Any) -> tuple[Any, list[tuple[str, int]]]:
+        """Residuals of the fixed terminal positions/velocities and their labels (what, sensor index)."""
+        s = self.structure
+        b = self.layout.unpack(P)
+        residuals, labels = [], []
+        for i in range(s.N):
+            p = x[s.n_sigma + 2 * i : s.n_sigma + 2 * i + 2]
+            v = x[s.n_sigma + 2 * s.N + 2 * i : s.n_sigma + 2 * s.N + 2 * i + 2]
+            if s.fixed_position[i]:
+                residuals.append((p - b[f"pT_{i}"]) / b["length_scale"])
+                labels += [(f"terminal position {c}", i) for c in "xy"]
+            if s.fixed_velocity[i]:
+                residuals.append((v - b[f"vT_{i}"]) / b["velocity_scale"])
+                labels += [(f"terminal velocity {c}", i) for c in "xy"]
+        return (ca.vertcat(*residuals) if residuals else type(x)(0, 1)), labels
+
+    def control_bounds(self, u: Any, P: Any) -> tuple[Any, list[int]]:
+        """``(|u_i|² − u_max²)/u_scale² ≤ 0`` for bounded sensors, and which sensors they are."""
+        s = self.structure
+        b = self.layout.unpack(P)
+        out, which = [], []
+        for i in range(s.N):
+            if s.bounded_control[i]:
+                out.append((ca.sumsqr(u[2 * i : 2 * i + 2]) - b[f"umax_{i}"] ** 2) / b["control_scale"] ** 2)
+                which.append(i)
+        return (ca.vertcat(*out) if out else type(u)(0, 1)), which

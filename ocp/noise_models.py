@@ -1,0 +1,110 @@
+"""Registry of sensor measurement-noise models r(p): variance of one measurement row vs. sensor position.
+
+A model is a pydantic class (its YAML keys) that also supplies the symbolic variance. To add one::
+
+    @register_noise_model
+    class Exponential(NoiseModel):
+        model: Literal["exponential"] = "exponential"
+        sigma0: PositiveFloat
+        length: PositiveFloat
+
+        def parameters(self) -> list[float]:
+            return [self.sigma0, self.length]
+
+        @staticmethod
+        def variance(p, s, theta):
+            return theta[0] * casadi.exp(casadi.sumsqr(p - s) / theta[1] ** 2)
+
+``variance`` receives CasADi expressions: ``p`` (2,) sensor position, ``s`` (2,) the location the row
+measures, ``theta`` the model's numeric parameters (NLP parameters, so sweeps over them need no rebuild).
+It must be positive for every position.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, Literal
+
+import casadi as ca
+
+from ocp.config import PositiveFloat, StrictModel
+
+__all__ = ["NoiseModel", "QuadraticRange", "ConstantNoise", "NOISE_MODELS", "register_noise_model", "parse_noise"]
+
+
+class NoiseModel(StrictModel):
+    """Base class of measurement-noise models (see module docstring for the contract)."""
+
+    model: str
+    #: number of entries returned by :meth:`parameters`
+    n_parameters: ClassVar[int] = 0
+
+    def parameters(self) -> list[float]:
+        """Numeric parameters ``theta`` passed to :meth:`variance`."""
+        raise NotImplementedError
+
+    @staticmethod
+    def variance(p: Any, s: Any, theta: Any) -> Any:
+        """Measurement variance r (symbolic) at sensor position ``p`` for a row located at ``s``."""
+        raise NotImplementedError
+
+
+#: model name -> NoiseModel subclass
+NOISE_MODELS: dict[str, type[NoiseModel]] = {}
+
+
+def register_noise_model(cls: type[NoiseModel]) -> type[NoiseModel]:
+    """Class decorator: make ``cls`` available as ``noise: {model: <name>, …}`` in problem files."""
+    name = cls.model_fields["model"].default
+    if not isinstance(name, str) or not name:
+        raise TypeError(f"{cls.__name__}.model needs a string default naming the model")
+    NOISE_MODELS[name] = cls
+    return cls
+
+
+@register_noise_model
+class QuadraticRange(NoiseModel):
+    """Noise growing with squared range (SPEC §1.2): ``r = beta * |p - s|^2 + gamma``."""
+
+    model: Literal["quadratic_range"] = "quadratic_range"
+    beta: PositiveFloat
+    gamma: PositiveFloat
+    n_parameters: ClassVar[int] = 2
+
+    def parameters(self) -> list[float]:
+        """Return ``[beta, gamma]``."""
+        return [self.beta, self.gamma]
+
+    @staticmethod
+    def variance(p: Any, s: Any, theta: Any) -> Any:
+        """``beta * |p - s|^2 + gamma`` (SPEC §1.2)."""
+        return theta[0] * ca.sumsqr(p - s) + theta[1]
+
+
+@register_noise_model
+class ConstantNoise(NoiseModel):
+    """Position-independent noise ``r = variance`` (a classical fixed-quality sensor)."""
+
+    model: Literal["constant"] = "constant"
+    variance_value: PositiveFloat
+    n_parameters: ClassVar[int] = 1
+
+    def parameters(self) -> list[float]:
+        """Return ``[variance_value]``."""
+        return [self.variance_value]
+
+    @staticmethod
+    def variance(p: Any, s: Any, theta: Any) -> Any:
+        """The constant ``theta[0]``."""
+        return theta[0] + 0 * p[0]
+
+
+def parse_noise(value: Any) -> NoiseModel:
+    """Validate a ``noise:`` mapping against the registered model it names."""
+    if isinstance(value, NoiseModel):
+        return value
+    if not isinstance(value, dict) or "model" not in value:
+        raise ValueError(f"expected a mapping with a 'model' key, one of {sorted(NOISE_MODELS)}")
+    name = value["model"]
+    if name not in NOISE_MODELS:
+        raise ValueError(f"unknown noise model {name!r}; expected one of {sorted(NOISE_MODELS)}")
+    return NOISE_MODELS[name].model_validate(value)

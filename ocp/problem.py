@@ -1,0 +1,251 @@
+"""The mobile-sensor Kalman optimal-control problem (SPEC §1) and its YAML schema.
+
+A :class:`Problem` is a validated pydantic model (the YAML file is its serialisation) with numpy
+accessors for the matrices. Units are the user's: positions in length units L, time in T; the
+cost is dimensionless only if the user's matrices make it so.
+
+Example file (``problems/hussein2008.yaml``)::
+
+    name: hussein2008
+    horizon: {t0: 0.0, tf: 10.0}
+    process: {A: [[-0.5]], B: [[1.0]], Q: [[1.0]], Sigma0: [[200.0]], locations: [[0.0, 0.0]]}
+    sensors:
+      - {name: s1, p0: [10, 10], v0: [0, -2], noise: {model: quadratic_range, beta: 5, gamma: 3}}
+    cost: {M: [[20.0]], K: [[0.0]], alpha: 0.004}
+    solver: {method: direct, collocation: {scheme: radau, degree: 3, intervals: 100},
+             homotopy: {mode: fixed, step: 0.05}}
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import BeforeValidator, Field, SerializeAsAny, model_validator
+
+from ocp.config import (
+    FiniteFloat,
+    InvalidValue,
+    Matrix,
+    PositiveFloat,
+    StrictModel,
+    Vector2,
+    check_psd,
+    check_shape,
+    check_spd,
+    check_square,
+    load_config,
+    parse_config,
+)
+from ocp.noise_models import NoiseModel, parse_noise
+
+__all__ = [
+    "Horizon",
+    "Process",
+    "Terminal",
+    "Sensor",
+    "Cost",
+    "CollocationOptions",
+    "HomotopyOptions",
+    "SolverOptions",
+    "Problem",
+    "load_problem",
+]
+
+
+class Horizon(StrictModel):
+    """Time horizon [t0, tf] (T)."""
+
+    t0: FiniteFloat = 0.0
+    tf: FiniteFloat
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Horizon:
+        if not self.tf > self.t0:
+            raise InvalidValue("tf", f"expected tf > t0 = {self.t0}, got {self.tf}")
+        return self
+
+
+class Process(StrictModel):
+    """The process ``x' = A x + B w``, ``E[w w'] = Q``, its initial error covariance and locations."""
+
+    A: Matrix
+    B: Matrix
+    Q: Matrix
+    Sigma0: Matrix
+    locations: list[Vector2] = Field(description="one planar location per state (L)")
+
+    @model_validator(mode="after")
+    def _shapes(self) -> Process:
+        A = check_square("A", self.A)
+        n = A.shape[0]
+        m = np.asarray(self.B).shape[1]
+        check_shape("B", self.B, (n, m))
+        check_psd("Q", check_shape("Q", self.Q, (m, m)))
+        check_spd("Sigma0", check_shape("Sigma0", self.Sigma0, (n, n)))
+        if len(self.locations) != n:
+            raise InvalidValue("locations", f"expected {n} locations (one per state), got {len(self.locations)}")
+        return self
+
+    @property
+    def n_states(self) -> int:
+        """Number of process states n."""
+        return len(self.A)
+
+
+class Terminal(StrictModel):
+    """Fixed terminal sensor position and/or velocity (omitted = free)."""
+
+    p: Vector2 | None = None
+    v: Vector2 | None = None
+
+
+class Sensor(StrictModel):
+    """One mobile sensor: a planar double integrator ``p' = v, v' = u`` with a noise model."""
+
+    name: str
+    p0: Vector2
+    v0: Vector2
+    noise: Annotated[SerializeAsAny[NoiseModel], BeforeValidator(parse_noise)]
+    measures: Matrix | None = Field(default=None, description="rows of C_i (default: every state)")
+    terminal: Terminal | None = None
+    u_max: PositiveFloat | None = Field(default=None, description="bound on |u_i| (L/T^2)")
+
+
+class Cost(StrictModel):
+    """Cost weights: ``J = Tr[M Σ(tf)] + ∫ (alpha/2 |u|^2 + Tr[K Σ]) dt``."""
+
+    M: Matrix
+    K: Matrix | None = None
+    alpha: PositiveFloat
+
+
+class CollocationOptions(StrictModel):
+    """Direct-collocation transcription: scheme, polynomial degree, number of intervals."""
+
+    scheme: Literal["radau", "legendre"] = "radau"
+    degree: int = Field(3, ge=1, le=9)
+    intervals: int = Field(100, ge=1, le=100_000)
+
+
+class HomotopyOptions(StrictModel):
+    """ε-continuation (SPEC §1.3): ``fixed`` steps of ``step``, ``adaptive`` steps, or ``none``."""
+
+    mode: Literal["fixed", "adaptive", "none"] = "fixed"
+    step: float = Field(0.05, gt=0.0, le=1.0)
+    min_step: float = Field(1e-3, gt=0.0, le=1.0)
+    growth: float = Field(2.0, ge=1.0, le=10.0)
+
+
+class SolverOptions(StrictModel):
+    """How to solve: method, transcription, homotopy and Ipopt tolerances."""
+
+    method: Literal["direct", "indirect", "both"] = "direct"
+    collocation: CollocationOptions = CollocationOptions()
+    homotopy: HomotopyOptions = HomotopyOptions()
+    tolerance: float = Field(1e-9, gt=0.0, lt=1e-2, description="Ipopt tol (scaled NLP error)")
+    max_iterations: int = Field(500, ge=1)
+
+
+class Problem(StrictModel):
+    """A mobile-sensor Kalman optimal-control problem (SPEC §1.1) plus its solver options."""
+
+    name: str = Field(pattern=r"^[A-Za-z0-9_.\-]+$")
+    horizon: Horizon
+    process: Process
+    sensors: list[Sensor] = Field(min_length=1)
+    cost: Cost
+    solver: SolverOptions = SolverOptions()
+
+    @model_validator(mode="after")
+    def _cross_checks(self) -> Problem:
+        n = self.process.n_states
+        check_spd("cost.M", check_shape("cost.M", self.cost.M, (n, n)))
+        if self.cost.K is not None:
+            check_psd("cost.K", check_shape("cost.K", self.cost.K, (n, n)))
+        names = [s.name for s in self.sensors]
+        for i, sensor in enumerate(self.sensors):
+            if names.index(sensor.name) != i:
+                raise InvalidValue(f"sensors[{i}].name", f"duplicate sensor name {sensor.name!r}")
+            if sensor.measures is not None:
+                rows = np.asarray(sensor.measures, dtype=float)
+                if rows.shape[1] != n:
+                    raise InvalidValue(
+                        f"sensors[{i}].measures", f"expected rows of length n = {n}, got {rows.shape[1]}"
+                    )
+                if np.any(np.all(rows == 0.0, axis=1)):
+                    raise InvalidValue(f"sensors[{i}].measures", "expected no all-zero row")
+        return self
+
+    # ------------------------------------------------------------------ numeric accessors
+    @property
+    def n(self) -> int:
+        """Number of process states."""
+        return self.process.n_states
+
+    @property
+    def N(self) -> int:  # noqa: N802  (SPEC symbol)
+        """Number of sensors."""
+        return len(self.sensors)
+
+    def matrices(self) -> dict[str, np.ndarray]:
+        """Numeric problem data: A (n,n), BQB' (n,n), Sigma0 (n,n), M (n,n), K (n,n), locations (n,2)."""
+        A = np.asarray(self.process.A, float)
+        B = np.asarray(self.process.B, float)
+        Q = np.asarray(self.process.Q, float)
+        K = np.zeros((self.n, self.n)) if self.cost.K is None else np.asarray(self.cost.K, float)
+        return {
+            "A": A,
+            "BQB": B @ Q @ B.T,
+            "Sigma0": np.asarray(self.process.Sigma0, float),
+            "M": np.asarray(self.cost.M, float),
+            "K": K,
+            "locations": np.asarray(self.process.locations, float),
+        }
+
+    def measurement_rows(self, i: int) -> np.ndarray:
+        """Rows of C_i for sensor ``i``, shape (m_i, n); default the identity (every state)."""
+        measures = self.sensors[i].measures
+        return np.eye(self.n) if measures is None else np.asarray(measures, float)
+
+    def row_locations(self, i: int) -> np.ndarray:
+        """Location (m_i, 2) each measurement row of sensor ``i`` refers to.
+
+        A row c measures the states it weights; its location is the |c|-weighted mean of those states'
+        locations (for a unit row e_j this is exactly s_j, the paper's case).
+        """
+        rows = np.abs(self.measurement_rows(i))
+        return (rows @ self.matrices()["locations"]) / rows.sum(axis=1, keepdims=True)
+
+    # ------------------------------------------------------------------ identity
+    def normalised(self) -> dict[str, Any]:
+        """The problem as a plain dict with every default filled in (what is hashed and stored)."""
+        return self.model_dump(mode="json")
+
+    def digest(self) -> str:
+        """SHA-256 (hex, 16 chars) of the normalised problem including solver options."""
+        text = json.dumps(self.normalised(), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    def with_solver(self, **changes: Any) -> Problem:
+        """A copy with solver options changed, e.g. ``with_solver(collocation={"intervals": 50})``."""
+        data = self.normalised()
+        for key, value in changes.items():
+            if isinstance(value, dict):
+                data["solver"][key].update(value)
+            else:
+                data["solver"][key] = value
+        return Problem.from_dict(data)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], source: str = "<dict>") -> Problem:
+        """Validate a dict (e.g. parsed YAML); raises :class:`ocp.config.ConfigError`."""
+        return parse_config(data, cls, source=source)
+
+
+def load_problem(path: str | Path) -> Problem:
+    """Read and validate a problem YAML file; raises :class:`ocp.config.ConfigError` (one line)."""
+    return load_config(path, Problem)

@@ -1,0 +1,79 @@
+"""Terminal display of a solve: a live progress bar over homotopy steps and a short result table (rich)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from ocp.problem import Problem
+from ocp.solution import HomotopyStep, Solution
+from ocp.solve import solve
+
+__all__ = ["SolveReporter"]
+
+
+class SolveReporter:
+    """Runs a solve with progress on stderr and prints the result table on stdout."""
+
+    def __init__(self, problem: Problem, quiet: bool = False) -> None:
+        self.problem = problem
+        self.quiet = quiet
+        self.console = Console(stderr=False, highlight=False)
+        self.err = Console(stderr=True, highlight=False)
+
+    def run(self, method: str) -> Solution:
+        """Solve with ``method``, updating a progress bar after each ε step."""
+        if self.quiet:
+            return solve(self.problem, method)
+        h = self.problem.solver.homotopy
+        total = 1 if h.mode == "none" else (round(1 / h.step) if h.mode == "fixed" else None)
+        with Progress(
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            TextColumn("{task.fields[info]}"),
+            TimeElapsedColumn(),
+            console=self.err,
+            transient=not sys.stderr.isatty(),
+        ) as progress:
+            task = progress.add_task(f"{self.problem.name} ({method})", total=total, info="building…")
+
+            def on_step(step: HomotopyStep) -> None:
+                mark = "✓" if step.success else "✗"
+                progress.update(
+                    task,
+                    advance=1 if step.success else 0,
+                    info=f"ε = {step.eps:.3g}  J_ε = {step.cost:.6g}  {step.iterations} it {mark}",
+                )
+
+            return solve(self.problem, method, progress=on_step)
+
+    def report(self, solution: Solution, out: Path) -> None:
+        """Print the cost split, homotopy summary and timings."""
+        if self.quiet:
+            return
+        s = solution.summary()
+        steps = solution.homotopy
+        table = Table(title=f"{solution.problem.name} — {solution.method} — {solution.status}", show_header=False)
+        table.add_column("quantity")
+        table.add_column("value", justify="right")
+        table.add_row("J (ε = 1)", f"{s['cost']:.10g}")
+        table.add_row("  terminal Tr[MΣ(tf)]", f"{s['terminal_cost']:.10g}")
+        table.add_row("  running ∫(α/2|u|² + Tr KΣ)", f"{s['running_cost']:.6g}")
+        table.add_row("  control energy ∫α/2|u|²", f"{s['control_energy']:.6g}")
+        base = solution.baseline.get("cost")
+        if base is not None:
+            table.add_row("no-control baseline J", f"{base:.10g}")
+            table.add_row("improvement", f"{s['improvement_percent']:.2f} %")
+        if steps:
+            table.add_row("homotopy steps", f"{len(steps)} (ε reached {solution.eps:g})")
+            table.add_row("Ipopt iterations", f"{sum(x.iterations for x in steps)} (first step {steps[0].iterations})")
+            table.add_row("solve time", f"{s['solve_time_s']:.3f} s (first step {steps[0].time_s:.3f} s)")
+        if "build_time_s" in s:
+            table.add_row("transcription build", f"{s['build_time_s']:.3f} s")
+        table.add_row("min eig Σ(t)", f"{s['min_sigma_eigenvalue']:.4g}")
+        table.add_row("output", str(out))
+        self.console.print(table)

@@ -1,0 +1,172 @@
+"""The ``mobisense solve|validate`` command line: outputs contract, bad input (exit 2), solver failure (exit 1)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+import yaml
+
+import cli
+from tests.problems import PROBLEMS, hussein2008
+
+
+def write(tmp_path, data, name="problem.yaml"):
+    path = tmp_path / name
+    path.write_text(yaml.safe_dump(data) if not isinstance(data, str) else data)
+    return path
+
+
+def run_cli(args, capsys):
+    code = cli.main([str(a) for a in args])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_solve_writes_the_contract(tmp_path, capsys):
+    out = tmp_path / "out"
+    code, stdout, _ = run_cli(["solve", PROBLEMS / "hussein2008.yaml", "--out", out, "--intervals", "40"], capsys)
+    assert code == 0
+    summary = json.loads((out / "summary.json").read_text())
+    for key in (
+        "name",
+        "method",
+        "status",
+        "cost",
+        "terminal_cost",
+        "running_cost",
+        "control_energy",
+        "solve_time_s",
+        "homotopy",
+        "baseline",
+        "improvement_percent",
+        "problem_hash",
+    ):
+        assert key in summary
+    assert summary["status"] == "solved"
+    assert summary["cost"] == pytest.approx(summary["terminal_cost"] + summary["running_cost"], rel=1e-14)
+    assert len(summary["homotopy"]) == 20 and summary["homotopy"][-1]["eps"] == 1.0
+    assert set(summary["homotopy"][0]) == {"eps", "cost", "iterations", "status", "time_s"}
+    assert summary["solver"]["collocation"]["intervals"] == 40
+    assert summary["improvement_percent"] == pytest.approx(
+        100 * (summary["baseline"]["cost"] - summary["cost"]) / summary["baseline"]["cost"]
+    )
+    for figure in ("paths.png", "covariance.png", "controls.png", "homotopy.png", "solution.nc"):
+        assert (out / figure).stat().st_size > 0
+    assert "improvement" in stdout
+    assert not list(out.glob(".*.tmp"))
+
+
+def test_every_shipped_problem_validates(capsys):
+    files = sorted(PROBLEMS.glob("*.yaml"))
+    problems = [f for f in files if "process:" in f.read_text()]
+    assert len(problems) >= 3
+    code, stdout, _ = run_cli(["validate", *problems], capsys)
+    assert code == 0
+    assert stdout.count("valid") == len(problems)
+
+
+def _mutate(path, value):
+    def apply(data):
+        target = data
+        for key in path[:-1]:
+            target = target[key]
+        if value is KeyError:
+            del target[path[-1]]
+        else:
+            target[path[-1]] = value
+        return data
+
+    return apply
+
+
+BAD_INPUTS = [
+    ("cost.alhpa", _mutate(["cost", "alhpa"], 0.1), "did you mean 'alpha'"),
+    ("cost.alpha", _mutate(["cost", "alpha"], -1.0), "> 0"),
+    ("cost.alpha", _mutate(["cost", "alpha"], math.nan), "finite"),
+    ("cost", _mutate(["cost"], KeyError), "required"),
+    ("cost.M", _mutate(["cost", "M"], [[-1.0]]), "positive definite"),
+    ("cost.M", _mutate(["cost", "M"], [[1.0, 0.0], [0.0, 1.0]]), "shape 1x1"),
+    ("cost.K", _mutate(["cost", "K"], [[-2.0]]), "semidefinite"),
+    ("process.A", _mutate(["process", "A"], [[1.0, 2.0]]), "square"),
+    ("process.B", _mutate(["process", "B"], [[1.0], [2.0]]), "shape 1x1"),
+    ("process.Sigma0", _mutate(["process", "Sigma0"], [[0.0]]), "positive definite"),
+    ("process.locations", _mutate(["process", "locations"], [[0.0, 0.0], [1.0, 1.0]]), "one per state"),
+    ("sensors[0].p0", lambda d: (d["sensors"][0].update(p0=[1.0, 2.0, 3.0]), d)[1], "length 2"),
+    ("sensors[0].noise.beta", lambda d: (d["sensors"][0]["noise"].update(beta=0.0), d)[1], "> 0"),
+    ("sensors[0].noise", lambda d: (d["sensors"][0]["noise"].update(model="cubic"), d)[1], "unknown noise model"),
+    ("sensors[0].measures", lambda d: (d["sensors"][0].update(measures=[[1.0, 0.0]]), d)[1], "length n = 1"),
+    ("sensors[1].name", lambda d: (d["sensors"].append(dict(d["sensors"][0])), d)[1], "duplicate"),
+    ("horizon.tf", _mutate(["horizon", "tf"], -1.0), "tf > t0"),
+    (
+        "solver.collocation.intervals",
+        _mutate(["solver", "collocation", "intervals"], 0),
+        "expected greater than or equal to 1",
+    ),
+    (
+        "solver.collocation.scheme",
+        _mutate(["solver", "collocation", "scheme"], "gauss"),
+        "expected 'radau' or 'legendre'",
+    ),
+    ("solver.homotopy.step", _mutate(["solver", "homotopy", "step"], 2.0), "expected less than or equal to 1"),
+]
+
+
+@pytest.mark.parametrize("key,mutate,expected", BAD_INPUTS, ids=[f"{k}:{e}" for k, _, e in BAD_INPUTS])
+@pytest.mark.parametrize("command", ["solve", "validate"])
+def test_bad_input_exit_2_with_key_path(tmp_path, capsys, command, key, mutate, expected):
+    path = write(tmp_path, mutate(hussein2008()))
+    out = tmp_path / "out"
+    args = [command, path] + (["--out", out] if command == "solve" else [])
+    code, stdout, stderr = run_cli(args, capsys)
+    assert code == 2
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1, stderr
+    assert str(path) in lines[0] and f" {key}:" in lines[0] and expected in lines[0], lines[0]
+    assert "Traceback" not in stderr
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "text,expected",
+    [
+        ("name: x\nhorizon: {t0: 0, tf: [1\n", "invalid YAML"),
+        ("- just\n- a list\n", "expected a mapping"),
+    ],
+)
+def test_malformed_yaml(tmp_path, capsys, text, expected):
+    path = write(tmp_path, text)
+    code, _, stderr = run_cli(["solve", path, "--out", tmp_path / "out"], capsys)
+    assert code == 2 and expected in stderr and str(path) in stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_missing_file(tmp_path, capsys):
+    code, _, stderr = run_cli(["validate", tmp_path / "nope.yaml"], capsys)
+    assert code == 2 and "file not found" in stderr
+
+
+def test_command_line_override_is_validated(tmp_path, capsys):
+    code, _, stderr = run_cli(
+        ["solve", PROBLEMS / "hussein2008.yaml", "--intervals", "0", "--out", tmp_path / "o"], capsys
+    )
+    assert code == 2 and "solver.collocation.intervals" in stderr
+
+
+def test_solver_failure_keeps_results_and_names_the_constraint(tmp_path, capsys):
+    # 3 Ipopt iterations cannot solve the first, cold step (it needs 19): the run fails, exits 1, and keeps
+    # what it has (the coasting ε → 0 solution) with the failure described in problem terms.
+    data = hussein2008(max_iterations=3, collocation={"intervals": 30})
+    path = write(tmp_path, data)
+    out = tmp_path / "out"
+    code, _, stderr = run_cli(["solve", path, "--out", out, "--no-plot"], capsys)
+    assert code == 1
+    assert "Maximum_Iterations_Exceeded" in stderr and "worst-violated constraint" in stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "failed"
+    assert summary["homotopy"][-1]["status"] == "Maximum_Iterations_Exceeded"
+    worst = summary["worst_violation"]
+    assert worst["constraint"].startswith(("dynamics of", "continuity of", "initial value of", "terminal"))
+    assert 0.0 <= worst["time"] <= 10.0
+    assert (out / "solution.nc").exists()
