@@ -73,16 +73,24 @@ def synthetic_problem(n: int, N: int, K: int) -> Problem:
     for i in range(N):
         phi = 2 * np.pi * (i + 0.5) / N
         p0 = 10 * np.array([np.cos(phi), np.sin(phi)])
-        sensors.append({
-            "name": f"s{i}", "p0": p0.tolist(), "v0": (-0.1 * p0 + [0.0, 0.5]).tolist(),
-            "noise": {"model": "quadratic_range", "beta": 2.0, "gamma": 1.0},
-        })
+        sensors.append(
+            {
+                "name": f"s{i}",
+                "p0": p0.tolist(),
+                "v0": (-0.1 * p0 + [0.0, 0.5]).tolist(),
+                "noise": {"model": "quadratic_range", "beta": 2.0, "gamma": 1.0},
+            }
+        )
     data = {
         "name": f"synthetic_n{n}_N{N}",
         "horizon": {"t0": 0.0, "tf": 10.0},
-        "process": {"A": A.tolist(), "B": np.eye(n).tolist(), "Q": np.eye(n).tolist(),
-                    "Sigma0": (50 * np.eye(n)).tolist(),
-                    "locations": (3 * np.column_stack([np.cos(angles), np.sin(angles)])).tolist()},
+        "process": {
+            "A": A.tolist(),
+            "B": np.eye(n).tolist(),
+            "Q": np.eye(n).tolist(),
+            "Sigma0": (50 * np.eye(n)).tolist(),
+            "locations": (3 * np.column_stack([np.cos(angles), np.sin(angles)])).tolist(),
+        },
         "sensors": sensors,
         "cost": {"M": (10 * np.eye(n)).tolist(), "K": np.eye(n).tolist(), "alpha": 0.05},
         "solver": {"collocation": {"intervals": K}, "homotopy": {"mode": "fixed", "step": 0.25}},
@@ -101,12 +109,24 @@ def main() -> None:
     results = {name: time_homotopy(problem, opts, args.repeats) for name, opts in MUMPS_VARIANTS.items()}
     chosen = results[next(iter(MUMPS_VARIANTS))]
     table = Table(title=f"default problem (K = 100, Radau d = 3), median of {args.repeats}")
-    for col in ("Ipopt/MUMPS options", "build s", "cold step s", "20-step homotopy s", "iterations",
-                "homotopy ratio vs chosen"):
+    for col in (
+        "Ipopt/MUMPS options",
+        "build s",
+        "cold step s",
+        "20-step homotopy s",
+        "iterations",
+        "homotopy ratio vs chosen",
+    ):
         table.add_column(col, justify="right" if col != "Ipopt/MUMPS options" else "left")
     for name, r in results.items():
-        table.add_row(name, f"{r['build']:.3f}", f"{r['cold']:.4f}", f"{r['homotopy']:.4f}", f"{r['iterations']:.0f}",
-                      f"{r['homotopy'] / chosen['homotopy']:.2f}")
+        table.add_row(
+            name,
+            f"{r['build']:.3f}",
+            f"{r['cold']:.4f}",
+            f"{r['homotopy']:.4f}",
+            f"{r['iterations']:.0f}",
+            f"{r['homotopy'] / chosen['homotopy']:.2f}",
+        )
     console.print(table)
     console.print(
         f"targets: cold {chosen['cold']:.4f} s (< 0.15: {'met' if chosen['cold'] < 0.15 else 'MISSED'}), "
@@ -116,8 +136,7 @@ def main() -> None:
 
     Ns, ns, Ks = ([1, 2, 4, 8], [1, 2, 4], [50, 100, 200, 400]) if not args.quick else ([1, 4], [1, 2], [50, 200])
     scaling = Table(title="scaling: 4-step homotopy (δ = 0.25), median of 2 solves")
-    for col in ("N", "n", "K", "NLP vars", "build s", "solve s", "iterations", "ms/iteration",
-                "(ms/it)/K vs first K"):
+    for col in ("N", "n", "K", "NLP vars", "build s", "solve s", "iterations", "ms/iteration", "(ms/it)/K vs first K"):
         scaling.add_column(col, justify="right")
     for N in Ns:
         for n in ns:
@@ -135,9 +154,17 @@ def main() -> None:
                 ok = all(s.success for s in runs)
                 per_K = total / its / K
                 base_per_K = base_per_K or per_K
-                scaling.add_row(str(N), str(n), str(K), str(tr.nw), f"{build:.2f}",
-                                f"{total:.3f}" + ("" if ok else " (failed)"), f"{its:.0f}",
-                                f"{1000 * total / its:.2f}", f"{per_K / base_per_K:.2f}")
+                scaling.add_row(
+                    str(N),
+                    str(n),
+                    str(K),
+                    str(tr.nw),
+                    f"{build:.2f}",
+                    f"{total:.3f}" + ("" if ok else " (failed)"),
+                    f"{its:.0f}",
+                    f"{1000 * total / its:.2f}",
+                    f"{per_K / base_per_K:.2f}",
+                )
             console.print(f"  done N={N} n={n}", style="dim")
     console.print(scaling)
 

@@ -26,6 +26,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--step", type=float, default=None, help="override solver.homotopy.step (δ)")
     parser.add_argument("--no-plot", action="store_true", help="skip the figures")
     parser.add_argument("--quiet", action="store_true", help="no progress display or table")
+    parser.add_argument(
+        "--multistart",
+        type=int,
+        default=None,
+        metavar="K",
+        help="solve from K initial guesses (start 0: the homotopy; others: random feasible "
+        "trajectories solved at ε = 1) on dask workers and keep the best",
+    )
+    parser.add_argument("--workers", type=int, default=None, help="local worker processes for --multistart")
+    parser.add_argument("--scheduler", default=None, help="dask scheduler address for --multistart")
 
 
 def apply_overrides(data: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
@@ -50,7 +60,7 @@ def apply_overrides(data: dict[str, Any], args: argparse.Namespace) -> dict[str,
 
 def run(args: argparse.Namespace) -> int:
     """Validate, solve, write outputs; exit 0 (solved), 1 (solver failure, partial results kept), 2 (bad input)."""
-    from ocp.config import read_yaml
+    from ocp.config import ConfigError, read_yaml
     from ocp.problem import Problem
     from ocp.reporting import SolveReporter
 
@@ -58,8 +68,14 @@ def run(args: argparse.Namespace) -> int:
     problem = Problem.from_dict(data, source=str(args.problem))  # ConfigError -> exit 2, nothing written
     out = args.out if args.out is not None else Path("out") / problem.name
     reporter = SolveReporter(problem, quiet=args.quiet)
-    method = problem.solver.method
-    solution = reporter.run(method)
+    if args.multistart is not None:
+        if args.multistart < 1 or problem.solver.method != "direct":
+            raise ConfigError(f"{args.problem}: --multistart: expected K >= 1 with solver.method 'direct'")
+        from ocp.multistart import solve_multistart
+
+        solution = solve_multistart(problem, args.multistart, args.scheduler, args.workers)
+    else:
+        solution = reporter.run(problem.solver.method)
     solution.save(out)
     if not args.no_plot:
         from ocp.plots import save_figures

@@ -81,6 +81,8 @@ def solve_direct(
     problem: Problem,
     progress: Callable[[HomotopyStep], None] | None = None,
     transcription: DirectCollocation | None = None,
+    init: Solution | dict[str, Any] | None = None,
+    guess: np.ndarray | None = None,
 ) -> Solution:
     """Solve ``problem`` by direct collocation with the ε-homotopy of its solver options.
 
@@ -91,6 +93,14 @@ def solve_direct(
         Called with each :class:`HomotopyStep` as soon as it finishes (for progress displays).
     transcription : DirectCollocation, optional
         A prebuilt transcription of the same structure (default: cached per structure and grid).
+    init : Solution or dict, optional
+        A solved problem of the same structure and grid (e.g. a sweep neighbour), or its ``nlp`` point
+        (dict with ``w, lam_w, lam_g, P, signature``): the primal–dual point,
+        re-scaled to this problem, warm-starts ε = 1 directly; if Ipopt fails from there the usual
+        continuation from the coasting solution runs.
+    guess : ndarray, shape (nw,), optional
+        A scaled decision vector (see :meth:`DirectCollocation.pack`) to start a cold ε = 1 solve from,
+        without continuation (multi-start).
 
     Returns
     -------
@@ -103,8 +113,7 @@ def solve_direct(
     layout = tr.layout
     values = layout.values(problem)
     t_grid, order = _state_grid(tr, t0, tf)
-    P_base = layout.pack(values)
-    coasting = integrate(tr.model, P_base, t_grid)
+    coasting = integrate(tr.model, layout.pack(values), t_grid)
     values["cost_scale"] = max(abs(coasting.cost), 1e-8)
     w0 = _initial_guess(tr, coasting, layout.pack(values))
 
@@ -127,12 +136,25 @@ def solve_direct(
             state["failed"] = (result, P)
         return result.success
 
-    eps_reached = run_continuation(attempt, problem.solver.homotopy)
+    stats: dict[str, Any] = {"build_time_s": tr.build_time_s, "nlp_variables": tr.nw, "nlp_constraints": tr.ng}
+    eps_reached = 0.0
+    if init is not None:
+        stats["start"] = _start_from_solution(init, tr, layout.pack({**values, "eps": 1.0}), state)
+        if stats["start"] == "warm start from init":
+            eps_reached = 1.0 if attempt(1.0) else 0.0
+            if eps_reached < 1.0:
+                stats["start"] = "warm start from init failed; continuation from coasting"
+                state.update(w=w0, lam_w=None, lam_g=None)
+    elif guess is not None:
+        stats["start"] = "initial guess, ε = 1 directly"
+        state["w"] = np.asarray(guess, float)
+        eps_reached = 1.0 if attempt(1.0) else 0.0
+    if eps_reached < 1.0 and guess is None:
+        eps_reached = run_continuation(attempt, problem.solver.homotopy)
     solved = eps_reached == 1.0
     message = "converged at ε = 1"
-    stats: dict[str, Any] = {"build_time_s": tr.build_time_s, "nlp_variables": tr.nw, "nlp_constraints": tr.ng}
     if not solved:
-        failed_result, failed_P = state["failed"]
+        failed_result, _ = state["failed"]
         worst = _worst_violation(tr, failed_result, problem)
         stats["worst_violation"] = worst
         message = (
@@ -142,6 +164,20 @@ def solve_direct(
         )
     stats["total_time_s"] = time.perf_counter() - t_start
     return _assemble(problem, tr, values, state, steps, path, coasting, t_grid, order, solved, message, stats)
+
+
+def _start_from_solution(
+    init: Solution | dict[str, Any], tr: DirectCollocation, P: np.ndarray, state: dict[str, Any]
+) -> str:
+    """Load ``init``'s primal–dual point into ``state`` if its NLP has the same layout; say what happened."""
+    nlp = init.nlp if isinstance(init, Solution) else init
+    if nlp is None or (isinstance(init, Solution) and init.eps != 1.0):
+        return "init ignored: it carries no converged ε = 1 NLP point"
+    if nlp["signature"] != repr(tr.signature):
+        return "init ignored: different structure or grid"
+    w, lam_w, lam_g = tr.transfer(nlp["w"], nlp["lam_w"], nlp["lam_g"], nlp["P"], P)
+    state.update(w=w, lam_w=lam_w, lam_g=lam_g)
+    return "warm start from init"
 
 
 def _assemble(
@@ -197,7 +233,15 @@ def _assemble(
         stats=stats,
     )
     if state["result"] is not None:
-        lam = tr.costates(state["result"], P)
+        result = state["result"]
+        solution.nlp = {
+            "w": result.w,
+            "lam_w": result.lam_w,
+            "lam_g": result.lam_g,
+            "P": P,
+            "signature": repr(tr.signature),
+        }
+        lam = tr.costates(result, P)
         lam_sigma = lam[:, : s.n_sigma].copy()
         Lam = vec_to_sym(lam_sigma, n)
         off = ~np.eye(n, dtype=bool)

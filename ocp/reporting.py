@@ -75,5 +75,13 @@ class SolveReporter:
         if "build_time_s" in s:
             table.add_row("transcription build", f"{s['build_time_s']:.3f} s")
         table.add_row("min eig Σ(t)", f"{s['min_sigma_eigenvalue']:.4g}")
+        multistart = s.get("multistart")
+        if multistart:
+            costs = ", ".join(f"{g['cost']:.8g} (×{len(g['starts'])})" for g in multistart["optima"])
+            table.add_row(
+                "multi-start",
+                f"{multistart['converged']}/{multistart['starts']} converged; "
+                f"{len(multistart['optima'])} distinct optima: {costs}",
+            )
         table.add_row("output", str(out))
         self.console.print(table)

@@ -68,6 +68,8 @@ class Solution:
     path_Sigma: np.ndarray | None = None
     baseline: dict[str, float] = field(default_factory=dict)
     stats: dict[str, Any] = field(default_factory=dict)
+    #: the converged NLP point (scaled w, lam_w, lam_g, parameters P, layout signature) for warm starts
+    nlp: dict[str, Any] | None = None
 
     @property
     def cost(self) -> float:
@@ -143,7 +145,12 @@ class Solution:
             data["path_eps"] = (("step",), self.path_eps)
             data["path_p"] = (("step", "time", "sensor", "xy"), self.path_p)
             data["path_Sigma"] = (("step", "time", "row", "col"), self.path_Sigma)
+        if self.nlp is not None:
+            for key in ("w", "lam_w", "lam_g", "P"):
+                dim = {"w": "nlp_w", "lam_w": "nlp_w", "lam_g": "nlp_g", "P": "nlp_p"}[key]
+                data[f"nlp_{key}"] = ((dim,), np.asarray(self.nlp[key]), {"long_name": f"NLP {key} (warm starts)"})
         attrs = {
+            "nlp_signature": "" if self.nlp is None else self.nlp["signature"],
             "problem_yaml": yaml.safe_dump(self.problem.normalised(), sort_keys=False),
             "summary_json": json.dumps(self.summary()),
             "homotopy_json": json.dumps(to_jsonable([asdict(s) for s in self.homotopy])),
@@ -198,6 +205,15 @@ class Solution:
             path_Sigma=ds["path_Sigma"].values if has_path else None,
             baseline=json.loads(a["baseline_json"]),
             stats=json.loads(a["stats_json"]),
+            nlp=None
+            if "nlp_w" not in ds
+            else {
+                "w": ds["nlp_w"].values,
+                "lam_w": ds["nlp_lam_w"].values,
+                "lam_g": ds["nlp_lam_g"].values,
+                "P": ds["nlp_P"].values,
+                "signature": str(a["nlp_signature"]),
+            },
         )
 
     @classmethod

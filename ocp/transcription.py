@@ -232,6 +232,52 @@ class DirectCollocation:
             g=np.asarray(sol["g"]).ravel(),
         )
 
+    # ------------------------------------------------------------------ scaling and warm-start transfer
+    @property
+    def signature(self) -> tuple:
+        """What must match for two NLPs to share decision-vector and multiplier layouts."""
+        return (self.structure, self.colloc.scheme, self.colloc.degree, self.intervals)
+
+    def variable_scales(self, P: np.ndarray) -> np.ndarray:
+        """Physical size of one unit of each decision variable, shape (nw,)."""
+        x_scale, u_scale = (np.asarray(v).ravel() for v in self.model.scales(P))
+        out = np.empty(self.nw)
+        out[self.idx_xs] = x_scale[:, None]
+        out[self.idx_xc] = np.tile(x_scale, self.colloc.degree)[:, None]
+        out[self.idx_u] = np.tile(u_scale, self.colloc.degree)[:, None]
+        return out
+
+    def constraint_scales(self, P: np.ndarray) -> np.ndarray:
+        """Physical size of one unit of each constraint residual, shape (ng,)."""
+        b = self.layout.unpack(np.asarray(P, float))
+        x_scale = np.asarray(self.model.scales(P)[0]).ravel()
+        d, K = self.colloc.degree, self.intervals
+        terminal = [
+            float(b["length_scale"][0]) if kind.startswith("terminal position") else float(b["velocity_scale"][0])
+            for kind, _ in self._terminal_labels
+        ]
+        bounds = np.full(self._n_bound, float(b["control_scale"][0]) ** 2)
+        return np.concatenate([np.tile(x_scale, d * K), np.tile(x_scale, K), x_scale, terminal, bounds])
+
+    def transfer(
+        self, w: np.ndarray, lam_w: np.ndarray, lam_g: np.ndarray, P_from: np.ndarray, P_to: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Re-express a primal–dual point of the NLP with parameters ``P_from`` in the scaling of ``P_to``.
+
+        Physical values are kept: ``x = D_x w``, constraint multipliers ``μ = ν cost_scale / s_g`` and bound
+        multipliers ``z = ζ cost_scale / D_x`` (the KKT conditions are invariant under these maps), so a
+        solved neighbour of a sweep is an exact warm start for a problem whose scales differ.
+        """
+        cs_from = float(self.layout.unpack(np.asarray(P_from, float))["cost_scale"][0])
+        cs_to = float(self.layout.unpack(np.asarray(P_to, float))["cost_scale"][0])
+        v_from, v_to = self.variable_scales(P_from), self.variable_scales(P_to)
+        g_from, g_to = self.constraint_scales(P_from), self.constraint_scales(P_to)
+        return (
+            w * v_from / v_to,
+            lam_w * (cs_from / v_from) * (v_to / cs_to),
+            lam_g * (cs_from / g_from) * (g_to / cs_to),
+        )
+
     # ------------------------------------------------------------------ grids and (un)packing
     def times(self, t0: float, tf: float) -> tuple[np.ndarray, np.ndarray]:
         """Interval start times (K+1,) and collocation times (K, d)."""

@@ -1,0 +1,112 @@
+"""Sweep engine performance, measured in one run.
+
+Prints: the speedup of a 40-task sweep (8 α × 5 start positions of the default problem, K = 60) on a dask
+LocalCluster of 2 worker processes vs the same tasks, with the same nearest-neighbour warm starts, serially
+in one process (target ≥ 1.7× on 2 cores); the engine's per-task overhead; the transcription cache's saving
+per task; and the warm-start saving (median solve time of warm vs cold tasks).
+
+Usage: ``python benchmarks/bench_sweep.py``
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+import ocp  # noqa: F401
+from ocp.direct import _cached_transcription, solve_direct
+from ocp.engine import _nearest, open_client, run_tasks, solve_payload
+from ocp.problem import Problem
+from tests.problems import hussein2008
+
+console = Console()
+
+
+def tasks() -> list[dict]:
+    """40 problems: α × initial position."""
+    out = []
+    for alpha in np.geomspace(0.001, 0.02, 8):
+        for angle in np.linspace(-60, 60, 5):
+            data = hussein2008(collocation={"intervals": 60})
+            data["cost"]["alpha"] = float(alpha)
+            a = np.deg2rad(45 + angle)
+            data["sensors"][0]["p0"] = [float(14.14 * np.cos(a)), float(14.14 * np.sin(a))]
+            out.append({"problem": data, "coords": np.array([np.log(alpha), angle / 60])})
+    return out
+
+
+def serial(items: list[dict]) -> tuple[float, list[dict]]:
+    """The same tasks and warm-start policy in this process, one after the other."""
+    seeds, rows = [], []
+    t0 = time.perf_counter()
+    for item in items:
+        payload = {"problem": item["problem"], "seed": _nearest(seeds, None, item["coords"])}
+        result = solve_payload(payload)
+        if result["nlp"] is not None:
+            seeds.append((None, item["coords"], result["nlp"]))
+        rows.append(result["row"])
+    return time.perf_counter() - t0, rows
+
+
+def parallel(items: list[dict], workers: int) -> tuple[float, float, list[dict]]:
+    """Cluster start-up time, sweep wall time (excluding start-up), rows."""
+    rows: list[dict] = []
+    t0 = time.perf_counter()
+    with open_client(None, workers) as client:
+        client.run(lambda: __import__("ocp.direct"))  # workers import CasADi before the clock starts
+        startup = time.perf_counter() - t0
+        t1 = time.perf_counter()
+        run_tasks(
+            client,
+            [{"problem": i["problem"]} for i in items],
+            lambda i, r: rows.append(r["row"]),
+            coordinates=[i["coords"] for i in items],
+        )
+        wall = time.perf_counter() - t1
+    return startup, wall, rows
+
+
+def main() -> None:
+    """Run and print the measurements."""
+    items = tasks()
+    _cached_transcription.cache_clear()
+    problem = Problem.from_dict(items[0]["problem"])
+    t0 = time.perf_counter()
+    solve_direct(problem)
+    first = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    solve_direct(problem)
+    cached = time.perf_counter() - t0
+    _cached_transcription.cache_clear()
+
+    serial_time, serial_rows = serial(items)
+    startup, wall, rows = parallel(items, 2)
+    busy = sum(r["time_s"] for r in rows)
+    table = Table(title="40-task sweep (default problem, K = 60), measured in this run")
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    table.add_row("serial, one process", f"{serial_time:.2f} s")
+    table.add_row("LocalCluster, 2 worker processes", f"{wall:.2f} s (+ {startup:.2f} s cluster start-up)")
+    table.add_row("speedup (target ≥ 1.7)", f"{serial_time / wall:.2f}×")
+    table.add_row("speedup incl. start-up", f"{serial_time / (wall + startup):.2f}×")
+    table.add_row("engine overhead per task", f"{1000 * max(0.0, 2 * wall - busy) / len(rows):.1f} ms")
+    table.add_row("transcription cache saving per task", f"{first - cached:.3f} s ({first:.3f} s → {cached:.3f} s)")
+    for name, group in (("serial", serial_rows), ("parallel", rows)):
+        warm = [r["solve_time_s"] for r in group if r["start"] == "warm start from init"]
+        cold = [r["solve_time_s"] for r in group if r["start"] != "warm start from init"]
+        if warm and cold:
+            table.add_row(
+                f"{name}: median solve warm / cold",
+                f"{statistics.median(warm):.3f} s / {statistics.median(cold):.3f} s "
+                f"({len(warm)} warm, {len(cold)} cold)",
+            )
+    table.add_row("all solved", str(all(r["status"] == "solved" for r in rows + serial_rows)))
+    console.print(table)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,142 @@
+"""Distributed solving on dask.distributed: sweeps and multi-start, resumable and fault-tolerant.
+
+Tasks carry plain data (problem dicts, numpy arrays), never CasADi objects; each worker process builds
+and caches the transcription of a problem structure (:func:`ocp.direct.transcription_for`) and re-solves
+it with new parameters. The client keeps at most ``2 × workers`` tasks in flight so that each new task
+can be warm-started from the nearest finished task of the same structure (primal–dual point re-scaled by
+:meth:`DirectCollocation.transfer`). A task that raises, or whose worker dies more often than dask
+retries, becomes a row with ``status = "error"``; nothing stops the sweep.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import numpy as np
+
+__all__ = ["solve_payload", "open_client", "run_tasks"]
+
+
+def solve_payload(payload: dict[str, Any]) -> dict[str, Any]:
+    """Worker side: solve one task. ``payload`` = {problem, seed (NLP point or None), guess_seed (int|None)}."""
+    from ocp.direct import _cached_transcription, solve_direct
+    from ocp.problem import Problem
+
+    t0 = time.perf_counter()
+    hits = _cached_transcription.cache_info().hits
+    problem = Problem.from_dict(payload["problem"], source="task")
+    guess = None
+    if payload.get("guess_seed") is not None:
+        from ocp.multistart import random_guess
+
+        guess = random_guess(problem, payload["guess_seed"])
+    solution = solve_direct(problem, init=payload.get("seed"), guess=guess)
+    cached = _cached_transcription.cache_info().hits > hits
+    row = {
+        "status": solution.status,
+        "cost": solution.cost,
+        "terminal_cost": solution.terminal_cost,
+        "running_cost": solution.running_cost,
+        "iterations": int(sum(s.iterations for s in solution.homotopy)),
+        "time_s": time.perf_counter() - t0,
+        "solve_time_s": float(sum(s.time_s for s in solution.homotopy)),
+        "worker": _worker_name(),
+        "error": "" if solution.success else solution.message,
+        "start": solution.stats.get("start", "continuation from coasting"),
+        "transcription_cached": cached,
+    }
+    return {"row": row, "dataset": solution.to_dataset(), "nlp": solution.nlp if solution.success else None}
+
+
+def _worker_name() -> str:
+    try:
+        from dask.distributed import get_worker
+
+        return str(get_worker().name)
+    except (ImportError, ValueError):
+        return "local"
+
+
+@contextlib.contextmanager
+def open_client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
+    """A dask Client: on ``scheduler`` (``tcp://…``) or on a LocalCluster of ``workers`` processes."""
+    import os
+
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler:
+        with Client(scheduler) as client:
+            yield client
+        return
+    n = workers or os.cpu_count() or 1
+    with (
+        LocalCluster(
+            n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=50
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        yield client
+
+
+def _nearest(seeds: list[tuple[Any, np.ndarray, dict]], key: Any, point: np.ndarray) -> dict | None:
+    candidates = [(np.linalg.norm(coords - point), nlp) for k, coords, nlp in seeds if k == key]
+    return min(candidates, key=lambda c: c[0])[1] if candidates else None
+
+
+def run_tasks(
+    client: Any,
+    payloads: list[dict[str, Any]],
+    on_result: Callable[[int, dict[str, Any]], None],
+    structure_keys: list[Any] | None = None,
+    coordinates: list[np.ndarray] | None = None,
+    warm_start: bool = True,
+    in_flight: int | None = None,
+) -> None:
+    """Run ``payloads`` on ``client``, calling ``on_result(i, result)`` as each finishes (in completion order).
+
+    ``result`` is the worker's dict, or ``{"row": {"status": "error", "error": …}}`` if the task failed.
+    With ``warm_start``, a task submitted after others finished is seeded from the nearest one (Euclidean
+    distance of ``coordinates``, normalised per dimension) with the same ``structure_keys`` entry.
+    """
+    from dask.distributed import as_completed
+
+    n = len(payloads)
+    if n == 0:
+        return
+    keys = structure_keys or [None] * n
+    coords = coordinates or [np.zeros(1)] * n
+    spread = np.ptp(np.stack(coords), axis=0) if len(coords) > 1 else np.ones_like(coords[0])
+    spread[spread == 0] = 1.0
+    coords = [c / spread for c in coords]
+    seeds: list[tuple[Any, np.ndarray, dict]] = []
+    limit = in_flight or 2 * max(1, len(client.scheduler_info().get("workers", {})) or 1)
+    pending = iter(range(n))
+    futures: dict[Any, int] = {}
+    queue = as_completed()
+
+    def submit_next() -> None:
+        i = next(pending, None)
+        if i is None:
+            return
+        payload = dict(payloads[i])
+        if warm_start and payload.get("guess_seed") is None:
+            payload["seed"] = _nearest(seeds, keys[i], coords[i])
+        future = client.submit(solve_payload, payload, pure=False, key=f"task-{i}-{time.time_ns()}")
+        futures[future] = i
+        queue.add(future)
+
+    for _ in range(min(limit, n)):
+        submit_next()
+    for future in queue:
+        i = futures.pop(future)
+        try:
+            result = future.result()
+        except Exception as exc:  # noqa: BLE001  (a task's failure is data, not a crash of the sweep)
+            result = {"row": {"status": "error", "error": f"{type(exc).__name__}: {exc}"}}
+        if result.get("nlp") is not None:
+            seeds.append((keys[i], coords[i], result["nlp"]))
+        on_result(i, result)
+        submit_next()

@@ -1,0 +1,61 @@
+"""Key paths into nested problem data: ``cost.alpha``, ``sensors[0].p0`` (the names used in error messages)."""
+
+from __future__ import annotations
+
+import copy
+import difflib
+import re
+from typing import Any
+
+__all__ = ["parse_key_path", "get_path", "set_path"]
+
+_TOKEN = re.compile(r"([^.\[\]]+)|\[(\d+)\]")
+
+
+def parse_key_path(path: str) -> list[str | int]:
+    """Split ``"sensors[0].p0"`` into ``["sensors", 0, "p0"]``; raise ``ValueError`` if malformed."""
+    parts: list[str | int] = []
+    position = 0
+    for match in _TOKEN.finditer(path):
+        gap = path[position : match.start()]
+        if gap not in ("", "."):
+            raise ValueError(f"malformed key path {path!r}")
+        parts.append(match.group(1) if match.group(1) is not None else int(match.group(2)))
+        position = match.end()
+    if not parts or position != len(path) or path.startswith(".") or path.endswith("."):
+        raise ValueError(f"malformed key path {path!r}")
+    return parts
+
+
+def get_path(data: Any, path: str) -> Any:
+    """The value at ``path``; ``KeyError`` with a suggestion when a key or index does not exist."""
+    current = data
+    walked = ""
+    for part in parse_key_path(path):
+        if isinstance(part, int):
+            if not isinstance(current, list) or part >= len(current):
+                size = len(current) if isinstance(current, list) else 0
+                raise KeyError(f"{walked or '(top level)'} has no item [{part}] (it has {size})")
+            current = current[part]
+            walked += f"[{part}]"
+        else:
+            if not isinstance(current, dict) or part not in current:
+                keys = sorted(current) if isinstance(current, dict) else []
+                hint = difflib.get_close_matches(part, keys, n=1)
+                suggestion = f"; did you mean '{hint[0]}'?" if hint else ""
+                raise KeyError(f"{walked or '(top level)'} has no key '{part}'{suggestion}")
+            current = current[part]
+            walked += f".{part}" if walked else part
+    return current
+
+
+def set_path(data: dict[str, Any], path: str, value: Any) -> dict[str, Any]:
+    """A deep copy of ``data`` with the value at ``path`` (which must exist) replaced by ``value``."""
+    get_path(data, path)
+    out = copy.deepcopy(data)
+    parts = parse_key_path(path)
+    target: Any = out
+    for part in parts[:-1]:
+        target = target[part]
+    target[parts[-1]] = copy.deepcopy(value)
+    return out

@@ -1,0 +1,171 @@
+"""Sweeps and multi-start on a real dask LocalCluster of 2 worker processes."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+import cli
+from ocp.direct import solve_direct
+from ocp.engine import open_client, run_tasks
+from ocp.keypath import get_path, parse_key_path, set_path
+from ocp.problem import Problem
+from ocp.sweep import SweepSpec, expand_sweep
+from tests.problems import hussein2008
+
+ALPHAS = [0.002, 0.004, 0.008]
+STARTS = [[10.0, 10.0], [10.0, -10.0], [8.0, 12.0]]
+
+
+def small_base():
+    return hussein2008(collocation={"intervals": 40})
+
+
+@pytest.fixture()
+def sweep_file(tmp_path):
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump(small_base()))
+    spec = {"base": "base.yaml", "mode": "grid", "vary": {"cost.alpha": ALPHAS, "sensors[0].p0": STARTS}}
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    return path
+
+
+def test_key_paths():
+    assert parse_key_path("sensors[0].p0") == ["sensors", 0, "p0"]
+    data = {"sensors": [{"p0": [1, 2]}], "cost": {"alpha": 1.0}}
+    assert get_path(data, "sensors[0].p0") == [1, 2]
+    assert set_path(data, "cost.alpha", 2.0)["cost"]["alpha"] == 2.0 and data["cost"]["alpha"] == 1.0
+    with pytest.raises(KeyError, match="did you mean 'alpha'"):
+        get_path(data, "cost.alpah")
+    with pytest.raises(KeyError, match=r"no item \[3\]"):
+        get_path(data, "sensors[3].p0")
+    with pytest.raises(ValueError):
+        parse_key_path("cost..alpha")
+
+
+def test_zip_mode_needs_equal_lengths():
+    spec = SweepSpec(base="x", mode="zip", vary={"cost.alpha": [0.1, 0.2], "horizon.tf": [5.0]})
+    with pytest.raises(ValueError, match="equal length"):
+        expand_sweep(spec, Problem.from_dict(small_base()))
+
+
+def test_grid_sweep_equals_single_solves_and_resumes(sweep_file, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert cli.main(["sweep", str(sweep_file), "--out", str(out), "--workers", "2", "--quiet"]) == 0
+    rows = pd.read_parquet(out / "results.parquet")
+    assert len(rows) == 9 and set(rows["status"]) == {"solved"}
+    assert {
+        "cost.alpha",
+        "sensors[0].p0",
+        "status",
+        "cost",
+        "terminal_cost",
+        "running_cost",
+        "iterations",
+        "time_s",
+        "worker",
+    } <= set(rows.columns)
+    for _, row in rows.iterrows():
+        data = small_base()
+        data["cost"]["alpha"] = row["cost.alpha"]
+        data["sensors"][0]["p0"] = list(row["sensors[0].p0"])
+        single = solve_direct(Problem.from_dict(data))
+        # same optimum whether warm-started from a neighbour or continued from coasting (Ipopt tol 1e-9)
+        assert row["cost"] == pytest.approx(single.cost, rel=1e-8)
+    assert len(list((out / "tasks").glob("*/solution.nc"))) == 9
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["counts"]["solved"] == 9 and summary["best"]["cost"] == pytest.approx(rows["cost"].min())
+    assert summary["warm_start"]["warm_tasks"] >= 1
+    # re-running the same command computes nothing
+    stamps = {p: p.stat().st_mtime_ns for p in (out / "tasks").glob("*/solution.nc")}
+    assert cli.main(["sweep", str(sweep_file), "--out", str(out), "--workers", "2", "--quiet"]) == 0
+    assert json.loads((out / "summary.json").read_text())["counts"]["resumed"] == 9
+    assert stamps == {p: p.stat().st_mtime_ns for p in (out / "tasks").glob("*/solution.nc")}
+
+
+def test_interrupted_sweep_resumes_without_recomputing(sweep_file, tmp_path, monkeypatch):
+    import ocp.command_sweep as command
+
+    out = tmp_path / "out"
+    real_write = command._write_rows
+    writes = {"n": 0}
+
+    def interrupt_after_four(path, rows):
+        real_write(path, rows)
+        writes["n"] += 1
+        if writes["n"] == 4:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(command, "_write_rows", interrupt_after_four)
+    assert cli.main(["sweep", str(sweep_file), "--out", str(out), "--workers", "2", "--quiet"]) == 130
+    assert len(pd.read_parquet(out / "results.parquet")) == 4
+    monkeypatch.setattr(command, "_write_rows", real_write)
+    computed = []
+    monkeypatch.setattr(command, "_write_rows", lambda p, r: (computed.append(1), real_write(p, r)))
+    assert cli.main(["sweep", str(sweep_file), "--out", str(out), "--workers", "2", "--quiet"]) == 0
+    assert len(computed) == 5  # only the five unfinished tasks ran
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["counts"]["resumed"] == 4 and summary["counts"]["solved"] == 9
+
+
+def test_killed_worker_does_not_lose_tasks():
+    problems = []
+    for alpha in np.linspace(0.002, 0.01, 8):
+        data = small_base()
+        data["cost"]["alpha"] = float(alpha)
+        problems.append({"problem": data})
+    results = {}
+    with open_client(None, 2) as client:
+        pids = list(client.run(os.getpid).values())
+
+        def on_result(i, result):
+            results[i] = result["row"]
+            if len(results) == 2:
+                os.kill(pids[0], signal.SIGKILL)  # the nanny restarts it; dask reschedules its tasks
+
+        run_tasks(client, problems, on_result, warm_start=False)
+    assert sorted(results) == list(range(8))
+    assert all(r["status"] == "solved" for r in results.values())
+
+
+def test_invalid_parameter_path_fails_before_running(tmp_path, capsys):
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump(small_base()))
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump({"base": "base.yaml", "vary": {"cost.alhpa": [0.1, 0.2]}}))
+    out = tmp_path / "out"
+    assert cli.main(["sweep", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "cost.alhpa" in err and "did you mean 'alpha'" in err and str(path) in err
+    assert not out.exists()
+
+
+def test_invalid_parameter_value_fails_before_running(tmp_path, capsys):
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump(small_base()))
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump({"base": "base.yaml", "vary": {"cost.alpha": [0.1, -1.0]}}))
+    assert cli.main(["sweep", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "task 1" in err and "cost.alpha" in err and "> 0" in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_multistart_reports_optima(tmp_path, capsys):
+    path = tmp_path / "p.yaml"
+    path.write_text(yaml.safe_dump(small_base()))
+    out = tmp_path / "out"
+    assert (
+        cli.main(["solve", str(path), "--multistart", "3", "--workers", "2", "--out", str(out), "--no-plot", "--quiet"])
+        == 0
+    )
+    summary = json.loads((out / "summary.json").read_text())
+    multistart = summary["multistart"]
+    assert multistart["starts"] == 3 and multistart["converged"] >= 1
+    assert sum(len(g["starts"]) for g in multistart["optima"]) == multistart["converged"]
+    single = solve_direct(Problem.from_dict(small_base()))
+    assert summary["cost"] <= single.cost * (1 + 1e-8)  # the best of several starts is never worse
