@@ -102,6 +102,8 @@ def expand_sweep(spec: SweepSpec, base: Problem, source: str = "<sweep>") -> lis
             problem = Problem.from_dict(problem_data, source=source)
         except ConfigError as exc:
             detail = str(exc).split(": ", 1)[1]
-            raise ConfigError(f"{source}: vary (task {index}: {dict(zip(keys, combo, strict=True))}): {detail}") from None
+            raise ConfigError(
+                f"{source}: vary (task {index}: {dict(zip(keys, combo, strict=True))}): {detail}"
+            ) from None
         tasks.append(SweepTask(problem.digest(), index, dict(zip(keys, combo, strict=True)), problem.normalised()))
     return tasks

@@ -1,0 +1,89 @@
+"""Noise covariances of the cooperative filter (SPEC §2.1-2.2): M, R and U, in Python and in YAML.
+
+:class:`CooperativeNoise` holds the three covariances as arrays; :class:`NoiseConfig` is the YAML form
+``noise: {sigma_process: 0.1, sigma_measurement: 0.5, sigma_hessian: 1.0}`` used by formation files
+(SPEC §2.4: ``M = σ1² I_3``, ``R = σ2² I_N``, ``U = σ3² I_4``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimation.kalman import transpose
+from ocp.config import NonNegativeFloat, PositiveFloat, StrictModel
+
+__all__ = ["CooperativeNoise", "NoiseConfig"]
+
+
+@dataclass(frozen=True)
+class CooperativeNoise:
+    """Covariances of the information model (SPEC §2.1, eqs. 7-9).
+
+    Parameters
+    ----------
+    process : ndarray, shape (3, 3)
+        ``M = E[ε ε']``, covariance of the state-equation noise per step (field units², see ``s``).
+    measurement : float or ndarray, shape (N,) or (N, N)
+        ``R = E[n n']``: a variance shared by all platforms, per-platform variances, or a full matrix
+        (field unit²).
+    hessian_error : ndarray, shape (4, 4)
+        ``U = E[e e']``, covariance of the error of ``vec(Ĥ)`` ((field unit / L²)²).
+    """
+
+    process: np.ndarray
+    measurement: np.ndarray | float
+    hessian_error: np.ndarray
+
+    def __post_init__(self) -> None:
+        M = np.asarray(self.process, dtype=float)
+        U = np.asarray(self.hessian_error, dtype=float)
+        if M.shape != (3, 3):
+            raise ValueError(f"process covariance M: expected shape (3, 3), got {M.shape}")
+        if U.shape != (4, 4):
+            raise ValueError(f"hessian_error covariance U: expected shape (4, 4), got {U.shape}")
+        R = np.asarray(self.measurement, dtype=float)
+        if R.ndim > 2:
+            raise ValueError(f"measurement covariance R: expected a scalar, (N,) or (N, N), got shape {R.shape}")
+        object.__setattr__(self, "process", M)
+        object.__setattr__(self, "hessian_error", U)
+        object.__setattr__(self, "measurement", R)
+
+    @classmethod
+    def from_sigmas(cls, sigma_process: float, sigma_measurement: float, sigma_hessian: float) -> CooperativeNoise:
+        """``M = σ1² I_3``, ``R = σ2² I_N``, ``U = σ3² I_4`` (SPEC §2.4, Prop. 3.14)."""
+        return cls(
+            process=sigma_process**2 * np.eye(3),
+            measurement=float(sigma_measurement) ** 2,
+            hessian_error=sigma_hessian**2 * np.eye(4),
+        )
+
+    def measurement_matrix(self, n_platforms: int) -> np.ndarray:
+        """``R`` as an ``(N, N)`` matrix."""
+        R = self.measurement
+        if R.ndim == 0:
+            return float(R) * np.eye(n_platforms)
+        if R.ndim == 1:
+            if R.shape != (n_platforms,):
+                raise ValueError(f"measurement variances: expected {n_platforms} values, got {R.shape[0]}")
+            return np.diag(R)
+        if R.shape != (n_platforms, n_platforms):
+            raise ValueError(f"measurement covariance R: expected shape ({n_platforms}, {n_platforms}), got {R.shape}")
+        return R
+
+    def total_measurement_covariance(self, D: np.ndarray) -> np.ndarray:
+        """``D U D' + R`` (SPEC §2.2, eq. 15), shape ``(..., N, N)`` for ``D`` of shape ``(..., N, 4)``."""
+        return D @ self.hessian_error @ transpose(D) + self.measurement_matrix(D.shape[-2])
+
+
+class NoiseConfig(StrictModel):
+    """YAML form of :class:`CooperativeNoise` with isotropic covariances (standard deviations)."""
+
+    sigma_process: PositiveFloat
+    sigma_measurement: PositiveFloat
+    sigma_hessian: NonNegativeFloat = 0.0
+
+    def to_noise(self) -> CooperativeNoise:
+        """The corresponding :class:`CooperativeNoise`."""
+        return CooperativeNoise.from_sigmas(self.sigma_process, self.sigma_measurement, self.sigma_hessian)
