@@ -1,0 +1,29 @@
+"""Every ``mobisense …`` command shown in README.md runs (outputs redirected to a temporary folder)."""
+
+from __future__ import annotations
+
+import re
+import shlex
+from pathlib import Path
+
+import pytest
+
+import cli
+
+ROOT = Path(__file__).resolve().parent.parent
+README = (ROOT / "README.md").read_text(encoding="utf-8")
+BLOCKS = re.findall(r"```(?:sh|bash|console)\n(.*?)```", README, flags=re.S)
+COMMANDS = [line.strip() for block in BLOCKS for line in block.splitlines() if line.strip().startswith("mobisense ")]
+
+
+def test_readme_starts_with_the_two_commands():
+    first_block = BLOCKS[0].splitlines()
+    assert first_block[0].startswith("make demo") and first_block[1].startswith("make test")
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_readme_command_runs(command, tmp_path, monkeypatch):
+    monkeypatch.chdir(ROOT)
+    args = shlex.split(command)[1:]
+    args = [str(tmp_path / Path(a).name) if i > 0 and args[i - 1] == "--out" else a for i, a in enumerate(args)]
+    assert cli.main(args) == 0, command
