@@ -32,6 +32,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scheduler", default=None, help="address of a running dask scheduler (tcp://…)")
     parser.add_argument("--workers", type=int, default=None, help="local worker processes (default: one per core)")
     parser.add_argument("--no-warm-start", action="store_true", help="solve every task from the coasting guess")
+    parser.add_argument("--time-limit", type=float, default=None, metavar="S",
+                        help="wall-clock limit of each Ipopt solve of a task (sets solver.time_limit)")
     parser.add_argument("--quiet", action="store_true", help="no progress display")
 
 
@@ -61,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
     from ocp.sweep_report import SweepProgress, sweep_summary
 
     spec, base = load_sweep(args.sweep)
+    if args.time_limit is not None:
+        base = base.with_solver(time_limit=args.time_limit)
     tasks = expand_sweep(spec, base, source=str(args.sweep))  # ConfigError -> exit 2, nothing run or written
     out = args.out if args.out is not None else Path("out") / args.sweep.stem
     results_path = out / "results.parquet"

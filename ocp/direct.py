@@ -27,9 +27,18 @@ __all__ = ["solve_direct", "transcription_for", "coasting_baseline"]
 
 @lru_cache(maxsize=16)
 def _cached_transcription(
-    structure: Structure, scheme: str, degree: int, intervals: int, tolerance: float, max_iterations: int
+    structure: Structure,
+    scheme: str,
+    degree: int,
+    intervals: int,
+    tolerance: float,
+    max_iterations: int,
+    time_limit: float | None = None,
 ) -> DirectCollocation:
-    return DirectCollocation(structure, scheme, degree, intervals, tolerance=tolerance, max_iterations=max_iterations)
+    extra = {} if time_limit is None else {"max_wall_time": time_limit}
+    return DirectCollocation(
+        structure, scheme, degree, intervals, ipopt_options=extra, tolerance=tolerance, max_iterations=max_iterations
+    )
 
 
 def transcription_for(problem: Problem) -> DirectCollocation:
@@ -37,7 +46,7 @@ def transcription_for(problem: Problem) -> DirectCollocation:
     opts = problem.solver
     c = opts.collocation
     return _cached_transcription(
-        Structure.of(problem), c.scheme, c.degree, c.intervals, opts.tolerance, opts.max_iterations
+        Structure.of(problem), c.scheme, c.degree, c.intervals, opts.tolerance, opts.max_iterations, opts.time_limit
     )
 
 

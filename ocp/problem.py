@@ -148,6 +148,7 @@ class SolverOptions(StrictModel):
     homotopy: HomotopyOptions = HomotopyOptions()
     tolerance: float = Field(1e-9, gt=0.0, lt=1e-2, description="Ipopt tol (scaled NLP error)")
     max_iterations: int = Field(500, ge=1)
+    time_limit: float | None = Field(None, gt=0.0, description="wall-clock limit of each Ipopt solve (s)")
 
 
 class Problem(StrictModel):

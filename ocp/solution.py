@@ -107,6 +107,7 @@ class Solution:
             "baseline": self.baseline,
             "improvement_percent": None if not base else 100.0 * (base - self.cost) / base,
             "min_sigma_eigenvalue": self.min_sigma_eigenvalue,
+            "sigma_positive_definite": self.min_sigma_eigenvalue > 0,
             "problem_hash": self.problem.digest(),
             "solver": self.problem.solver.model_dump(mode="json"),
         }

@@ -169,3 +169,14 @@ def test_multistart_reports_optima(tmp_path, capsys):
     assert sum(len(g["starts"]) for g in multistart["optima"]) == multistart["converged"]
     single = solve_direct(Problem.from_dict(small_base()))
     assert summary["cost"] <= single.cost * (1 + 1e-8)  # the best of several starts is never worse
+
+
+def test_timed_out_task_is_a_row_with_its_error():
+    slow = small_base()
+    slow["solver"]["time_limit"] = 1e-3  # seconds per Ipopt solve: the cold step cannot finish
+    rows = {}
+    with open_client(None, 1) as client:
+        run_tasks(client, [{"problem": slow}, {"problem": small_base()}], lambda i, r: rows.update({i: r["row"]}),
+                  warm_start=False)
+    assert rows[0]["status"] == "failed" and "Maximum_WallTime_Exceeded" in rows[0]["error"]
+    assert rows[1]["status"] == "solved"
