@@ -153,6 +153,7 @@ class Solution:
         attrs = {
             "nlp_signature": "" if self.nlp is None else self.nlp["signature"],
             "problem_yaml": yaml.safe_dump(self.problem.normalised(), sort_keys=False),
+            "solver_options_json": self.problem.solver.model_dump_json(),
             "summary_json": json.dumps(self.summary()),
             "homotopy_json": json.dumps(to_jsonable([asdict(s) for s in self.homotopy])),
             "baseline_json": json.dumps(to_jsonable(self.baseline)),
