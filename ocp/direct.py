@@ -18,7 +18,7 @@ import numpy as np
 from ocp.homotopy import run_continuation
 from ocp.model import Structure, vec_to_sym
 from ocp.problem import Problem
-from ocp.simulate import Trajectory, integrate
+from ocp.simulate import Trajectory, coast
 from ocp.solution import HomotopyStep, Solution
 from ocp.transcription import DirectCollocation, NLPResult
 
@@ -63,7 +63,7 @@ def coasting_baseline(problem: Problem, t_eval: np.ndarray, tr: DirectCollocatio
     """The ε → 0 solution: sensors coast (u ≡ 0), Σ from the Riccati IVP — the classical Kalman filter."""
     tr = tr or transcription_for(problem)
     P = tr.layout.pack(tr.layout.values(problem))
-    return integrate(tr.model, P, t_eval)
+    return coast(tr.model, P, t_eval)
 
 
 def _initial_guess(tr: DirectCollocation, coasting: Trajectory, P: np.ndarray) -> np.ndarray:
@@ -122,7 +122,7 @@ def solve_direct(
     layout = tr.layout
     values = layout.values(problem)
     t_grid, order = _state_grid(tr, t0, tf)
-    coasting = integrate(tr.model, layout.pack(values), t_grid)
+    coasting = coast(tr.model, layout.pack(values), t_grid)
     values["cost_scale"] = max(abs(coasting.cost), 1e-8)
     w0 = _initial_guess(tr, coasting, layout.pack(values))
 

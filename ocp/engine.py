@@ -112,23 +112,27 @@ def run_tasks(
     spread[spread == 0] = 1.0
     coords = [c / spread for c in coords]
     seeds: list[tuple[Any, np.ndarray, dict]] = []
-    limit = in_flight or 2 * max(1, len(client.scheduler_info().get("workers", {})) or 1)
+    n_workers = max(1, len(client.scheduler_info().get("workers", {})))
+    limit = in_flight or 2 * n_workers
     pending = iter(range(n))
     futures: dict[Any, int] = {}
     queue = as_completed()
 
-    def submit_next() -> None:
+    def submit_next() -> bool:
         i = next(pending, None)
         if i is None:
-            return
+            return False
         payload = dict(payloads[i])
         if warm_start and payload.get("guess_seed") is None:
             payload["seed"] = _nearest(seeds, keys[i], coords[i])
         future = client.submit(solve_payload, payload, pure=False, key=f"task-{i}-{time.time_ns()}")
         futures[future] = i
         queue.add(future)
+        return True
 
-    for _ in range(min(limit, n)):
+    # the first wave (one task per worker) starts cold; later tasks are queued two per worker, each seeded
+    # from the nearest task finished when it is submitted
+    for _ in range(min(n_workers if warm_start else limit, n)):
         submit_next()
     for future in queue:
         i = futures.pop(future)
@@ -139,4 +143,5 @@ def run_tasks(
         if result.get("nlp") is not None:
             seeds.append((keys[i], coords[i], result["nlp"]))
         on_result(i, result)
-        submit_next()
+        while len(futures) < limit and submit_next():
+            pass

@@ -185,3 +185,16 @@ def test_save_and_load_round_trip(default_solution, tmp_path):
     np.testing.assert_array_equal(loaded.lam_p, default_solution.lam_p)
     assert [h.eps for h in loaded.homotopy] == [h.eps for h in default_solution.homotopy]
     assert loaded.summary() == default_solution.summary()
+
+
+def test_cvodes_coasting_equals_scipy_integration():
+    # the compiled CVODES coasting solution (initial guess, baseline) against scipy's DOP853 at rtol 1e-12
+    from ocp.simulate import coast
+
+    problem = Problem.from_dict(coupled_two_sensor())
+    tr = transcription_for(problem)
+    P = tr.layout.pack(tr.layout.values(problem))
+    t = np.linspace(0.0, 5.0, 51)
+    a, b = coast(tr.model, P, t), integrate(tr.model, P, t, rtol=1e-12)
+    np.testing.assert_allclose(a.x, b.x, rtol=1e-8, atol=1e-9)
+    assert a.cost == pytest.approx(b.cost, rel=1e-9)

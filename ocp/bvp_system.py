@@ -1,0 +1,224 @@
+"""The Pontryagin boundary-value problem of the mobile-sensor Kalman problem (SPEC §1.3–1.4), by AD.
+
+Everything is derived with CasADi from the model's own functions (:class:`ocp.model.SensorKalmanModel`):
+no adjoint is written by hand.
+
+Continuation variable
+---------------------
+SPEC §1.4 writes ``H = L/ε + λ'f`` with λ the costate of J_ε (``L = α/2|u|² + Tr KΣ``). We solve instead
+for the costate ``μ = ε λ`` of ``ε J_ε = ε Φ + ∫ L`` (``Φ = Tr[M Σ(tf)]``), with the Hamiltonian
+
+    H̃(x, u, μ) = L(x, u) + μ'f(x, u) = ε H                                   (SPEC §1.4 times ε)
+    u* = argmin_u H̃ = −(1/α) B_s' μ = −(ε/α) B_s' λ                          (SPEC §1.3)
+    x' = ∂H̃/∂μ = f(x, u*),   μ' = −∂H̃/∂x |_{u*}                             (SPEC §1.4)
+    x(t0) = x0,   μ_k(tf) = ε ∂Φ/∂x_k (free components),  x_k(tf) = target_k (fixed components).
+
+The differential equations do not depend on ε at all; ε only scales the terminal costate. This is the
+same scaling the direct transcription uses (objective ε Φ + ∫ L) and it keeps every unknown bounded as
+ε → 0 (for K = 0, μ → 0 and u → 0: the coasting Kalman filter). λ = μ / ε is reported.
+
+The minimiser u* is obtained by AD too: H̃ is quadratic in u (control-affine f, quadratic L), so one
+Newton step from u = 0, ``u* = −(∂²H̃/∂u²)⁻¹ ∂H̃/∂u|_{u=0}``, is exact; the constructor checks that the
+Hessian does not depend on u. Control bounds (``u_max``) would turn u* into a non-smooth saturation and
+are not supported by the indirect method (use the direct method).
+
+Costate of the upper-triangle vector σ: for an off-diagonal σ_ij (standing for Σ_ij and Σ_ji)
+μ_σij = 2 ε Λ_ij, diagonal μ_σii = ε Λ_ii, with Λ the symmetric matrix costate of SPEC §1.4.
+
+Unknowns are scaled, ``z = y / D`` with y = [x, μ] and D (2 nx,) chosen by the caller, so that the BVP
+solvers see O(1) numbers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ocp.config import ConfigError
+from ocp.model import SensorKalmanModel, Structure, diagonal_indices, vec_to_sym
+from ocp.problem import Problem
+
+__all__ = ["HamiltonianSystem", "costate_matrix", "costate_vector"]
+
+
+def costate_matrix(mu_sigma: np.ndarray, n: int) -> np.ndarray:
+    """Symmetric matrix costate Λ (..., n, n) from the costate (..., n(n+1)/2) of the upper triangle σ."""
+    Lam = vec_to_sym(np.asarray(mu_sigma, float), n)
+    off = ~np.eye(n, dtype=bool)
+    Lam[..., off] *= 0.5  # SPEC §1.4 with σ_ij standing for Σ_ij and Σ_ji: μ_σij = 2 Λ_ij
+    return Lam
+
+
+def costate_vector(Lam: np.ndarray, n: int) -> np.ndarray:
+    """Inverse of :func:`costate_matrix`: costate of σ (..., n(n+1)/2) from Λ (..., n, n)."""
+    rows, cols = np.triu_indices(n)
+    factor = np.where(rows == cols, 1.0, 2.0)
+    return np.asarray(Lam, float)[..., rows, cols] * factor
+
+
+@dataclass(frozen=True)
+class _Functions:
+    rhs: ca.Function  # (z, P, D) -> z'
+    rhs_jac: ca.Function  # (z, P, D) -> ∂z'/∂z
+    bc: ca.Function  # (za, zb, P, D) -> residual
+    bc_jac: ca.Function  # (za, zb, P, D) -> (∂/∂za, ∂/∂zb)
+
+
+class HamiltonianSystem:
+    """State–costate system of one problem :class:`~ocp.model.Structure`, as CasADi functions.
+
+    Parameters
+    ----------
+    structure : Structure
+        Problem structure (sizes, noise models, which terminal states are fixed).
+
+    Attributes
+    ----------
+    model : SensorKalmanModel
+        The model the Hamiltonian is built from.
+    ny : int
+        Size 2 nx of y = [x, μ].
+    fixed_terminal : ndarray of bool, shape (nx,)
+        Components of x fixed at tf (their costate is free there).
+
+    Notes
+    -----
+    Functions (``z`` (2nx,) scaled unknowns, ``P`` packed parameters, ``D`` (2nx,) scales, y = D z):
+    ``hamiltonian(x, mu, P)`` H̃ at u*; ``control(x, mu, P)`` u* (2N,); ``dHdu(x, u, mu, P)`` ∂H̃/∂u;
+    ``rhs(z, P, D)`` dz/dt; ``rhs_jac`` its Jacobian; ``bc(za, zb, P, D)`` (2nx,) boundary residuals
+    (initial states, then per component of x at tf either the transversality condition or the fixed
+    value, all divided by the scale of the unknown they constrain); ``bc_jac`` -> (∂bc/∂za, ∂bc/∂zb).
+    """
+
+    def __init__(self, structure: Structure) -> None:
+        if any(structure.bounded_control):
+            raise ConfigError(
+                "sensors[].u_max: the indirect method does not support control bounds (u* would be a "
+                "non-smooth saturation); remove u_max or use solver.method 'direct'"
+            )
+        self.structure = s = structure
+        self.model = m = SensorKalmanModel(structure)
+        self.layout = m.layout
+        nx, nu = s.nx, s.nu
+        self.ny = 2 * nx
+        x = ca.SX.sym("x", nx)
+        mu = ca.SX.sym("mu", nx)
+        u = ca.SX.sym("u", nu)
+        P = ca.SX.sym("P", self.layout.size)
+        b = self.layout.unpack(P)
+
+        # SPEC §1.4 (times ε): H̃ = L + μ'f
+        H = m.running(x, u, P)[0] + ca.dot(mu, m.f(x, u, P))
+        dHdu = ca.gradient(H, u)
+        Huu = ca.hessian(H, u)[0]
+        if ca.depends_on(Huu, ca.vertcat(u, x, mu)):
+            raise NotImplementedError("the indirect method needs a Hamiltonian quadratic in u with constant ∂²H/∂u²")
+        # SPEC §1.3: u* = −(ε/α) B_s' λ, here as the exact Newton step from u = 0
+        u_star = -ca.solve(Huu, ca.substitute(dHdu, u, ca.DM.zeros(nu)))
+        x_dot = ca.substitute(ca.gradient(H, mu), u, u_star)  # = f(x, u*)
+        mu_dot = -ca.substitute(ca.gradient(H, x), u, u_star)  # SPEC §1.4: λ' = −∂H/∂x
+        self.control = ca.Function("control", [x, mu, P], [u_star], ["x", "mu", "P"], ["u"])
+        self.hamiltonian = ca.Function(
+            "hamiltonian", [x, mu, P], [ca.substitute(H, u, u_star)], ["x", "mu", "P"], ["H"]
+        )
+        self.dHdu = ca.Function("dHdu", [x, u, mu, P], [dHdu], ["x", "u", "mu", "P"], ["dHdu"])
+        self.costate_rhs = ca.Function("costate_rhs", [x, u, mu, P], [-ca.gradient(H, x)])
+
+        # terminal data: which components are fixed (selection constraints of the model)
+        g_T, _ = m.terminal_constraints(x, P)
+        fixed = np.zeros(nx, dtype=bool)
+        self._constraint_row: dict[int, int] = {}  # fixed component k -> the constraint row fixing it
+        if g_T.size1():
+            jac = ca.jacobian(g_T, x)
+            if ca.depends_on(jac, x):
+                raise NotImplementedError("terminal constraints must be linear in the state")
+            rows, cols = (np.array(v, dtype=int) for v in jac.sparsity().get_triplet())
+            if len(np.unique(cols)) != g_T.size1() or len(cols) != g_T.size1():
+                raise NotImplementedError("each terminal constraint must fix one state component")
+            fixed[cols] = True
+            self._constraint_row = dict(zip(cols.tolist(), rows.tolist(), strict=True))
+        self.fixed_terminal = fixed
+        self.terminal_gradient = ca.Function("dPhi", [x, P], [ca.gradient(m.terminal(x, P), x)])
+
+        z = ca.SX.sym("z", self.ny)
+        D = ca.SX.sym("D", self.ny)
+        y = D * z
+        z_dot = ca.vertcat(ca.substitute(x_dot, ca.vertcat(x, mu), y), ca.substitute(mu_dot, ca.vertcat(x, mu), y)) / D
+        za, zb = ca.SX.sym("za", self.ny), ca.SX.sym("zb", self.ny)
+        xa, xb, mub = D[:nx] * za[:nx], D[:nx] * zb[:nx], D[nx:] * zb[nx:]
+        terminal = ca.vertcat(*[self._terminal_residual(k, xb, mub, P, b, D) for k in range(nx)])
+        bc = ca.vertcat((xa - m.x0(P)) / D[:nx], terminal)
+        self._f = _Functions(
+            rhs=ca.Function("rhs", [z, P, D], [z_dot]),
+            rhs_jac=ca.Function("rhs_jac", [z, P, D], [ca.jacobian(z_dot, z)]),
+            bc=ca.Function("bc", [za, zb, P, D], [bc]),
+            bc_jac=ca.Function("bc_jac", [za, zb, P, D], [ca.jacobian(bc, za), ca.jacobian(bc, zb)]),
+        )
+        self._mapped: dict[tuple[str, int], ca.Function] = {}
+
+    def _terminal_residual(self, k: int, xb: ca.SX, mub: ca.SX, P: ca.SX, b: dict, D: ca.SX) -> ca.SX:
+        """Residual of component k at tf: fixed value (scaled like x_k) or transversality (scaled like μ_k)."""
+        nx = self.structure.nx
+        if self.fixed_terminal[k]:
+            g_T, _ = self.model.terminal_constraints(xb, P)
+            return g_T[self._constraint_row[k]]
+        dPhi = self.terminal_gradient(xb, P)
+        return (mub[k] - b["eps"] * dPhi[k]) / D[nx + k]  # SPEC §1.4: λ(tf) = ∂Φ/∂x(tf), times ε
+
+    # ------------------------------------------------------------------ numeric evaluation
+    def _map(self, name: str, m: int) -> ca.Function:
+        key = (name, m)
+        if key not in self._mapped:
+            self._mapped[key] = getattr(self._f, name).map(m, "serial")
+        return self._mapped[key]
+
+    def rhs(self, z: np.ndarray, P: np.ndarray, D: np.ndarray) -> np.ndarray:
+        """dz/dt at many points: ``z`` (2nx, m) -> (2nx, m)."""
+        return np.asarray(self._map("rhs", z.shape[1])(z, P, D))
+
+    def rhs_jac(self, z: np.ndarray, P: np.ndarray, D: np.ndarray) -> np.ndarray:
+        """∂(dz/dt)/∂z at many points: ``z`` (2nx, m) -> (2nx, 2nx, m) (scipy ``fun_jac`` layout)."""
+        m, ny = z.shape[1], self.ny
+        J = np.asarray(self._map("rhs_jac", m)(z, P, D))  # (ny, ny*m), blocks side by side
+        return J.reshape(ny, m, ny).transpose(0, 2, 1)
+
+    def bc(self, za: np.ndarray, zb: np.ndarray, P: np.ndarray, D: np.ndarray) -> np.ndarray:
+        """Boundary residuals (2nx,)."""
+        return np.asarray(self._f.bc(za, zb, P, D)).ravel()
+
+    def bc_jac(self, za: np.ndarray, zb: np.ndarray, P: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Jacobians (2nx, 2nx) of the boundary residuals with respect to z(t0) and z(tf)."""
+        Ja, Jb = self._f.bc_jac(za, zb, P, D)
+        return np.asarray(Ja), np.asarray(Jb)
+
+    @property
+    def functions(self) -> _Functions:
+        """The scalar (one-point) CasADi functions rhs, rhs_jac, bc, bc_jac (for symbolic solvers)."""
+        return self._f
+
+    # ------------------------------------------------------------------ helpers
+    def default_scales(self, problem: Problem, y_guess: np.ndarray, P: np.ndarray) -> np.ndarray:
+        """Scales D (2nx,) of y = [x, μ]: the largest |y_k| of the guess, floored by the model's scales.
+
+        States use max(model scale, max_t |x_k|). Costates of quantities that vary over orders of
+        magnitude (Λ spans 1e-5…20 on the default problem) are scaled by their largest value, floored at
+        1e-3 of the largest costate of the same kind, so that no scale is zero.
+        """
+        s = self.structure
+        nx = s.nx
+        x_scale = np.asarray(self.model.scales(P)[0]).ravel()
+        peak = np.abs(y_guess).max(axis=1)
+        D = np.empty(2 * nx)
+        D[:nx] = np.maximum(x_scale, peak[:nx])
+        groups = [np.arange(s.n_sigma), np.arange(s.n_sigma, s.n_sigma + 2 * s.N), np.arange(s.n_sigma + 2 * s.N, nx)]
+        all_peak = max(float(peak[nx:].max()), 1e-12)
+        for group in groups:
+            group_peak = max(float(peak[nx + group].max()), 1e-6 * all_peak)
+            D[nx + group] = np.maximum(peak[nx + group], 1e-3 * group_peak)
+        return D
+
+    def diagonal_sigma(self) -> list[int]:
+        """Indices of the diagonal Σ entries in x."""
+        return diagonal_indices(self.structure.n)
