@@ -1,0 +1,133 @@
+"""Optimised sensor trajectories as references to track (the OCP → control link of SPEC §2.8 / issue 5).
+
+* :func:`load_or_solve` — a ``solution.nc`` written by ``mobisense solve``, or, when the file does not
+  exist yet, the solution of the problem it came from, solved here by :func:`ocp.direct.solve_direct`
+  (so shipped scenarios run on a fresh clone);
+* :class:`ReferenceTrajectory` — positions and velocities of the solution as a C¹ cubic Hermite
+  spline through its state grid (``p`` with slopes ``v``: exact at every collocation point), and the
+  optimiser's own control ``u`` (linear between its collocation nodes) as the feed-forward;
+* :class:`TrackingController` — ``f = u_ref + Kp (p_ref − r) + Kd (v_ref − r')``: with ``u_ref = p_ref''``
+  the error obeys ``e'' + Kd e' + Kp e = 0``; the residual ``u_ref − p_ref''`` (collocation and
+  interpolation error) is what keeps a replay started on the reference off it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from ocp.solution import Solution
+
+__all__ = ["load_or_solve", "ReferenceTrajectory", "TrackingController"]
+
+
+def load_or_solve(solution_path: Path, problem_path: Path | None) -> tuple[Solution, str]:
+    """Load ``solution_path``; if it does not exist, solve ``problem_path`` by direct collocation.
+
+    Returns
+    -------
+    solution : Solution
+    note : str
+        What happened (printed by the command and stored in ``summary.json``).
+
+    Raises
+    ------
+    ConfigError
+        Neither the solution nor a problem to solve exists, or the problem file is invalid.
+    RuntimeError
+        The solver did not reach ε = 1.
+    """
+    from ocp.config import ConfigError
+    from ocp.solution import Solution
+
+    if solution_path.is_file():
+        return Solution.load(solution_path), f"loaded {solution_path}"
+    if problem_path is None:
+        raise ConfigError(f"{solution_path}: file not found (give 'problem:' to solve it first)")
+    from ocp.direct import solve_direct
+    from ocp.problem import load_problem
+
+    problem = load_problem(problem_path)  # ConfigError (one line) if invalid
+    solution = solve_direct(problem)
+    if not solution.success:
+        raise RuntimeError(f"solving {problem_path} failed: {solution.message}")
+    return solution, f"{solution_path} not found: solved {problem_path} by direct collocation first"
+
+
+class ReferenceTrajectory:
+    """Reference positions, velocities and feed-forward accelerations of every sensor of a solution.
+
+    Parameters
+    ----------
+    t : ndarray, shape (T,)
+        State times of the solution (strictly increasing).
+    p, v : ndarray, shape (T, N, 2)
+        Positions (L) and velocities (L/T) there.
+    t_u : ndarray, shape (Tu,)
+        Control times.
+    u : ndarray, shape (Tu, N, 2)
+        Optimised controls (L/T²); held constant outside ``[t_u[0], t_u[-1]]``.
+    """
+
+    def __init__(self, t: np.ndarray, p: np.ndarray, v: np.ndarray, t_u: np.ndarray, u: np.ndarray) -> None:
+        from scipy.interpolate import CubicHermiteSpline, interp1d
+
+        t, p, v = np.asarray(t, float), np.asarray(p, float), np.asarray(v, float)
+        if np.any(np.diff(t) <= 0):
+            raise ValueError("t: expected strictly increasing state times")
+        self.t0, self.tf = float(t[0]), float(t[-1])
+        self.n_sensors = p.shape[1]
+        self._position = CubicHermiteSpline(t, p, v, axis=0)
+        self._velocity = self._position.derivative()
+        u = np.asarray(u, float)
+        self._control = interp1d(
+            np.asarray(t_u, float), u, axis=0, bounds_error=False, fill_value=(u[0], u[-1])
+        )
+
+    @classmethod
+    def from_solution(cls, solution: Solution) -> ReferenceTrajectory:
+        """The reference of a :class:`~ocp.solution.Solution`."""
+        return cls(solution.t, solution.p, solution.v, solution.t_u, solution.u)
+
+    def __call__(self, t: float | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``p_ref, v_ref, u_ref`` at time(s) ``t``, each of shape ``t.shape + (N, 2)``."""
+        t = np.clip(t, self.t0, self.tf)
+        return self._position(t), self._velocity(t), self._control(t)
+
+    def acceleration(self, t: float | np.ndarray) -> np.ndarray:
+        """``p_ref''(t)`` of the Hermite spline (piecewise linear), shape ``t.shape + (N, 2)``.
+
+        ``u_ref − p_ref''`` is the residual that drives the tracking error (see the module notes).
+        """
+        return self._position.derivative(2)(np.clip(t, self.t0, self.tf))
+
+
+@dataclass(frozen=True)
+class TrackingController:
+    """PD tracking with feed-forward of a reference trajectory.
+
+    Parameters
+    ----------
+    stiffness : float
+        ``Kp`` (1/T²).
+    damping : float
+        ``Kd`` (1/T).
+    """
+
+    stiffness: float
+    damping: float
+
+    def __post_init__(self) -> None:
+        if not (self.stiffness > 0 and self.damping > 0):
+            raise ValueError(f"stiffness and damping must be > 0, got {self.stiffness}, {self.damping}")
+
+    def __call__(
+        self, position: np.ndarray, velocity: np.ndarray, reference: tuple[np.ndarray, np.ndarray, np.ndarray]
+    ) -> np.ndarray:
+        """Acceleration ``u_ref + Kp (p_ref − r) + Kd (v_ref − r')``, shape of ``position``."""
+        p_ref, v_ref, u_ref = reference
+        return u_ref + self.stiffness * (p_ref - position) + self.damping * (v_ref - velocity)

@@ -1,0 +1,195 @@
+"""The estimator in the replay loop: cooperative Kalman filter + Hessian source, and what the controller sees.
+
+:class:`ClosedLoopEstimator` wraps :class:`~estimation.cooperative_filter.CooperativeKalmanFilter`
+(SPEC §2.2) for one mission: at each sample it predicts to the new formation centre, asks its Hessian
+source for ``Ĥ_{c,k}`` (SPEC §2.5) and fuses the platforms' measurements. With spatially correlated
+noise ``w`` the measurement covariance is ``R_k = σ2² I + W(r_k)`` (the kernel at the platform
+positions): ``w`` is treated as white with its true marginal covariance, its correlation along the path
+is ignored (the seed's w = 0 filter, made consistent at each instant).
+
+Between samples the controllers see the filter's Taylor prediction at the moving centre
+(:meth:`ClosedLoopEstimator.derivatives`): ``s(r) = A(Δr) s_k(+) + h(Ĥ_k, Δr)`` with ``Δr = r − r_{c,k}``
+(SPEC §2.1, eq. 9) — the same model the next prediction uses. :class:`TrueField` gives the exact value
+and derivatives instead (``derivatives: true_field``).
+
+Hessian feedback: ``Ĥ`` enters the next prediction (``h = [½Δr'ĤΔr, ĤΔr]``), so a noisy snapshot
+estimate (the curvature method divides measurement noise by ``a²``) is fed back into ``∇ẑ`` and from
+there into the next curvature estimate; on the ocean field this loop diverges within an hour with
+the raw estimates. Two options break it: ``warmup`` (keep the initial ``Ĥ`` for the first samples, while
+the prior is still vague) and ``smoothing`` β (``Ĥ ← Ĥ + β (Ĥ_raw − Ĥ)``, a first-order low-pass with time
+constant ``Δt/β``).
+
+:class:`WindowHessian` is the Hessian source for formations without the cross's geometry (a rotating
+pair): a joint quadratic fit (:func:`~estimation.hessian_estimation.least_squares_hessian`, six
+unknowns) to all measurements of the last ``window`` samples, about their centroid.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from estimation.cooperative_filter import CooperativeKalmanFilter
+from estimation.fields import Field
+from estimation.hessian_estimation import CurvatureHessian, LeastSquaresHessian, least_squares_hessian
+from estimation.information_model import formation_center, hessian_drift, transition_matrix
+from estimation.noise_config import CooperativeNoise
+from estimation.spatial_noise import SpatialNoise
+
+__all__ = ["TrueField", "WindowHessian", "ClosedLoopEstimator"]
+
+
+@dataclass(frozen=True)
+class TrueField:
+    """Exact ``(z, ∇z, ∇²z)`` of a field at a point (the ``derivatives: true_field`` mode)."""
+
+    field: Field
+
+    def derivatives(self, r: np.ndarray, t: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Value (), gradient (2,), Hessian (2, 2) at ``r`` (2,)."""
+        return self.field.value(r, t), self.field.gradient(r, t), self.field.hessian(r, t)
+
+
+@dataclass
+class WindowHessian:
+    """Hessian from a joint quadratic fit to the measurements of the last ``window`` samples.
+
+    Parameters
+    ----------
+    window : int
+        Number of samples kept (all platforms of each).
+    history : deque
+        ``(positions (N, 2), measurements (N,))`` of past samples (filled by :meth:`__call__`).
+    """
+
+    window: int
+    history: deque = field(default_factory=deque)
+
+    def __call__(
+        self, positions: np.ndarray, measurements: np.ndarray, state_prior: np.ndarray,
+        covariance_prior: np.ndarray, previous_hessian: np.ndarray,
+    ) -> np.ndarray:  # fmt: skip
+        """``Ĥ_{c,k}`` (2, 2); the previous estimate until the window determines the fit (rank 6)."""
+        self.history.append((np.asarray(positions, float), np.asarray(measurements, float)))
+        while len(self.history) > self.window:
+            self.history.popleft()
+        points = np.concatenate([p for p, _ in self.history])
+        values = np.concatenate([m for _, m in self.history])
+        try:
+            _, hessian = least_squares_hessian(points, values)
+        except ValueError:  # not yet six well-spread points
+            return previous_hessian
+        return hessian
+
+
+class ClosedLoopEstimator:
+    """Cooperative filter of one replay, started at the first sample.
+
+    Parameters
+    ----------
+    noise : CooperativeNoise
+        ``M, R = σ2² I, U`` (SPEC §2.4).
+    spatial_noise : SpatialNoise or None
+        Kernel of ``w``; adds ``W(r_k)`` to ``R`` at every sample.
+    hessian : {"curvature", "least_squares", "window", "true_field", "fixed"}
+        Source of ``Ĥ_{c,k}``.
+    field : Field
+        The true field (only for ``hessian="true_field"``).
+    window : int
+        Samples of the ``window`` source.
+    """
+
+    def __init__(
+        self,
+        noise: CooperativeNoise,
+        spatial_noise: SpatialNoise | None,
+        hessian: str,
+        field: Field,
+        window: int = 10,
+        smoothing: float = 1.0,
+        warmup: int = 0,
+    ) -> None:
+        if not 0 < smoothing <= 1 or warmup < 0:
+            raise ValueError(f"smoothing: expected 0 < β <= 1, warmup >= 0; got {smoothing}, {warmup}")
+        self.base_noise, self.spatial_noise, self.field = noise, spatial_noise, field
+        self.smoothing, self.warmup, self.samples = smoothing, warmup, 0
+        sources = {
+            "curvature": lambda: CurvatureHessian(noise, spatial_noise),
+            "least_squares": lambda: LeastSquaresHessian(noise, spatial_noise),
+            "window": lambda: WindowHessian(window),
+            "true_field": lambda: self._true_hessian,
+            "fixed": lambda: None,
+        }
+        if hessian not in sources:
+            raise ValueError(f"hessian: expected one of {sorted(sources)}, got {hessian!r}")
+        self.source = sources[hessian]()
+        self.filter: CooperativeKalmanFilter | None = None
+        self.prior_covariance = np.full((3, 3), np.nan)
+
+    def _true_hessian(self, positions: np.ndarray, *_: np.ndarray) -> np.ndarray:
+        return self.field.hessian(formation_center(positions))
+
+    def _noise_at(self, positions: np.ndarray) -> CooperativeNoise:
+        if self.spatial_noise is None:
+            return self.base_noise
+        R = self.base_noise.measurement_matrix(len(positions)) + self.spatial_noise.W(positions)
+        return CooperativeNoise(self.base_noise.process, R, self.base_noise.hessian_error)
+
+    def start(
+        self, positions: np.ndarray, measurements: np.ndarray, state: np.ndarray, covariance: np.ndarray,
+        hessian: np.ndarray,
+    ) -> None:  # fmt: skip
+        """First sample: fuse ``measurements`` at ``positions`` (N, 2) into the prior (state, covariance)."""
+        self.filter = CooperativeKalmanFilter(
+            self._noise_at(positions), state, covariance, positions, hessian
+        )
+        self.prior_covariance = np.asarray(covariance, float)
+        self._fuse(positions, measurements, state, covariance)
+
+    def step(self, positions: np.ndarray, measurements: np.ndarray) -> None:
+        """A later sample: predict to the new centre (eqs. 13-14), estimate ``Ĥ``, update (eqs. 15-17)."""
+        if self.filter is None:
+            raise RuntimeError("ClosedLoopEstimator.step: call start() at the first sample first")
+        state_prior, covariance_prior = self.filter.predict(positions)
+        self.prior_covariance = covariance_prior
+        self._fuse(positions, measurements, state_prior, covariance_prior)
+
+    def _fuse(self, positions: np.ndarray, measurements: np.ndarray, xm: np.ndarray, Pm: np.ndarray) -> None:
+        filt = self.filter
+        self.last_measurements = np.asarray(measurements, dtype=float)
+        H = None
+        if self.source is not None and self.samples >= self.warmup:
+            raw = self.source(positions, measurements, xm, Pm, filt.hessian)
+            if np.all(np.isfinite(raw)):  # else degenerate geometry this step: keep the previous estimate
+                H = filt.hessian + self.smoothing * (raw - filt.hessian)  # exponential smoothing, factor β
+        self.samples += 1
+        filt.noise = self._noise_at(positions)
+        filt.update(measurements, H)
+
+    @property
+    def state(self) -> np.ndarray:
+        """Posterior ``s_k(+) = [z, ∂z/∂x, ∂z/∂y]`` at the last centre, shape (3,)."""
+        return self.filter.state[..., 0]
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """``P_k(+)``, shape (3, 3)."""
+        return self.filter.covariance
+
+    @property
+    def hessian(self) -> np.ndarray:
+        """``Ĥ_{c,k}``, shape (2, 2)."""
+        return self.filter.hessian
+
+    @property
+    def center(self) -> np.ndarray:
+        """Centre of the last sample, shape (2,)."""
+        return formation_center(self.filter.positions)
+
+    def derivatives(self, r: np.ndarray, t: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Predicted ``(z, ∇z, Ĥ)`` at ``r`` (2,) from the last posterior (SPEC §2.1, eq. 9)."""
+        shift = np.asarray(r, float) - self.center
+        s = transition_matrix(shift) @ self.state + hessian_drift(self.hessian, shift)
+        return s[0], s[1:], self.hessian

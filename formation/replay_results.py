@@ -1,0 +1,140 @@
+"""``result.nc`` and ``summary.json`` of a field replay (:mod:`formation.replay_simulation`).
+
+Variables of the dataset (dimension ``time`` = the filter samples):
+
+* ``z_true, z_est`` (time), ``grad_true, grad_est`` (time, xy) at the formation centre; ``z_std``,
+  ``grad_std`` from the filter covariance; ``hess_true, hess_est`` (time, xy, xy2);
+* ``r, v`` (time, platform, xy), ``center`` (time, xy), ``measurements`` (time, platform);
+* ``a, b`` — half-distances ``½‖r2 − r1‖``, ``½‖r3 − r4‖`` (the seed's shape variables; b is NaN for
+  N < 4) — and their desired values ``a_desired, b_desired``; ``shape_error = ‖q − q^d‖``;
+* ``theta`` — heading error of the centre w.r.t. the true level curve through it (SPEC §2.7),
+  ``theta_est`` the one the controller saw from the estimate; ``lyapunov`` ``V(θ, z)`` on the true field
+  (level-curve motion); ``reference, reference_error`` (reference motion);
+* attributes: the level ``C`` (NaN for reference motion), units, scenario name, seed.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from formation.level_curve import heading_error
+from formation.replay_simulation import CenterLevelCurve, ReplayRecord, ReplaySystem
+from formation.shape_control import shape_error
+
+__all__ = ["replay_dataset", "replay_summary"]
+
+
+def replay_dataset(record: ReplayRecord, system: ReplaySystem, seed: int) -> Any:
+    """The replay as an ``xarray.Dataset`` (see the module docstring)."""
+    import xarray as xr
+
+    s, A = system.scenario, record.arrays()
+    u = s.units
+    N = system.n_platforms
+    center, center_velocity = system.jacobi.to_jacobi(A["r"])[0], system.jacobi.to_jacobi(A["v"])[0]
+    q = system.jacobi.to_jacobi(A["r"])[1]
+    _, theta = heading_error(center_velocity, A["grad_true"])
+    _, theta_est = heading_error(center_velocity, A["grad_est"])
+    half = 0.5 * np.linalg.norm(A["r"][:, 1] - A["r"][:, 0], axis=-1)
+    other = (
+        0.5 * np.linalg.norm(A["r"][:, 2] - A["r"][:, 3], axis=-1) if N >= 4 else np.full(len(half), np.nan)
+    )
+    P = A["covariance"]
+    T, P2, X = ("time",), ("time", "platform", "xy"), ("time", "xy")
+    data = {
+        "z_true": (T, A["z_true"], {"long_name": "field at the formation centre", "units": u.field}),
+        "z_est": (T, A["z_est"], {"long_name": "filter estimate of z at the centre", "units": u.field}),
+        "z_std": (T, np.sqrt(P[:, 0, 0]), {"long_name": "filter standard deviation of z", "units": u.field}),
+        "grad_true": (X, A["grad_true"], {"long_name": "true gradient", "units": f"{u.field}/{u.length}"}),
+        "grad_est": (X, A["grad_est"], {"long_name": "estimated gradient", "units": f"{u.field}/{u.length}"}),
+        "grad_std": (X, np.sqrt(np.stack([P[:, 1, 1], P[:, 2, 2]], -1)), {"units": f"{u.field}/{u.length}"}),
+        "hess_true": (X + ("xy2",), A["hess_true"], {"units": f"{u.field}/{u.length}^2"}),
+        "hess_est": (X + ("xy2",), A["hess_est"], {"units": f"{u.field}/{u.length}^2"}),
+        "r": (P2, A["r"], {"long_name": "platform position", "units": u.length}),
+        "v": (P2, A["v"], {"long_name": "platform velocity", "units": f"{u.length}/{u.time}"}),
+        "center": (X, center, {"long_name": "formation centre", "units": u.length}),
+        "measurements": (("time", "platform"), A["measurements"], {"units": u.field}),
+        "a": (T, half, {"long_name": "half distance of platforms 1-2", "units": u.length}),
+        "b": (T, other, {"long_name": "half distance of platforms 3-4", "units": u.length}),
+        "a_desired": (T, A["a_desired"], {"units": u.length}),
+        "b_desired": (T, A["b_desired"], {"units": u.length}),
+        "shape_error": (T, shape_error(q, A["q_desired"]), {"long_name": "|q - q_d|", "units": u.length}),
+        "theta": (T, theta, {"long_name": "heading error w.r.t. the true level curve", "units": "rad"}),
+        "theta_est": (T, theta_est, {"long_name": "heading error seen by the controller", "units": "rad"}),
+    }  # fmt: skip
+    level = np.nan
+    if isinstance(system.center, CenterLevelCurve):
+        level = system.center.controller.level
+        V = system.center.controller.lyapunov(theta, A["z_true"])
+        data["lyapunov"] = (T, V, {"long_name": "V = -log cos^2(theta/2) + h(z) on the true field"})
+    if record.reference is not None:
+        error = np.linalg.norm(center - record.reference, axis=-1)
+        data["reference"] = (X, record.reference, {"long_name": "reference centre path", "units": u.length})
+        data["reference_error"] = (T, error, {"long_name": "|r_c - reference|", "units": u.length})
+    attrs = {
+        "C": level, "scenario": s.name, "seed": seed, "field": s.field.kind, "formation": s.formation.kind,
+        "motion": s.motion.kind, "length_unit": u.length, "time_unit": u.time, "field_unit": u.field,
+        "time_step": s.time_step,
+    }  # fmt: skip
+    coords = {"time": A["t"], "platform": np.arange(1, N + 1), "xy": ["x", "y"], "xy2": ["x", "y"]}
+    ds = xr.Dataset(data, coords=coords, attrs=attrs)
+    ds["time"].attrs["units"] = u.time
+    return ds
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.nanmean(np.asarray(x, float) ** 2)))
+
+
+def replay_summary(ds: Any, record: ReplayRecord, system: ReplaySystem) -> dict[str, Any]:
+    """Metrics of a replay: level error, heading, estimation errors, shape and tracking errors."""
+    K = ds.sizes["time"]
+    last_quarter, last_half = slice(K - max(1, K // 4), K), slice(K // 2, K)
+    z_err = (ds["z_est"] - ds["z_true"]).values
+    g_err = np.linalg.norm((ds["grad_est"] - ds["grad_true"]).values, axis=-1)
+    e = np.concatenate([z_err[:, None], (ds["grad_est"] - ds["grad_true"]).values], axis=-1)
+    P = np.asarray(record.covariance)
+    nees = np.einsum("ki,ki->k", e, np.linalg.solve(P, e[..., None])[..., 0])
+    wall = record.meta["wall_time_s"]
+    s = system.scenario
+    summary: dict[str, Any] = {
+        "kind": "field",
+        "scenario": s.name,
+        "platforms": system.n_platforms,
+        "duration": s.duration,
+        "time_step": s.time_step,
+        "steps": record.meta["steps"],
+        "units": s.units.model_dump(),
+        "derivatives": "true field" if system.true_derivatives else "filter estimates",
+        "rms_z_error": _rms(z_err),
+        "rms_gradient_error": _rms(g_err),
+        "mean_nees": float(nees.mean()),
+        "final_z_std": float(ds["z_std"].values[-1]),
+        "shape_error_rms_last_half": _rms(ds["shape_error"].values[last_half]),
+        "shape_error_final": float(ds["shape_error"].values[-1]),
+        "a_final": float(ds["a"].values[-1]),
+        "b_final": float(ds["b"].values[-1]),
+        "a_range": [float(np.nanmin(ds["a"].values)), float(np.nanmax(ds["a"].values))],
+        "mean_abs_theta_last_quarter": float(np.mean(np.abs(ds["theta"].values[last_quarter]))),
+        "wall_time_s": wall,
+        "simulated_time_per_wall_second": s.duration / wall if wall > 0 else None,
+    }
+    if np.isfinite(ds.attrs["C"]):
+        level_error = np.abs(ds["z_true"].values - ds.attrs["C"])
+        summary.update(
+            level=ds.attrs["C"],
+            final_level_error=float(level_error[-1]),
+            max_level_error_last_half=float(level_error[last_half].max()),
+            rms_level_error_last_half=_rms(level_error[last_half]),
+            lyapunov_max_increase=float(np.max(np.diff(ds["lyapunov"].values), initial=0.0)),
+        )
+    if "reference_error" in ds:
+        summary.update(
+            reference_tracking_rms=_rms(ds["reference_error"].values),
+            reference_tracking_max=float(ds["reference_error"].values.max()),
+            reference_tracking_final=float(ds["reference_error"].values[-1]),
+        )
+    summary.update({k: v for k, v in record.meta.items() if k not in ("wall_time_s", "steps")})
+    return summary

@@ -1,0 +1,177 @@
+"""``mobisense replay`` on field scenarios: outputs, shipped scenarios, validation (exit 2, key path)."""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import pytest
+import xarray as xr
+import yaml
+
+from cli import main
+
+PROBLEMS = Path(__file__).resolve().parent.parent / "problems"
+
+
+def shipped(name: str) -> dict:
+    return yaml.safe_load((PROBLEMS / f"{name}.yaml").read_text())
+
+
+def write(tmp_path: Path, data: dict, name: str = "scenario.yaml") -> Path:
+    path = tmp_path / name
+    path.write_text(yaml.safe_dump(data, allow_unicode=True))
+    return path
+
+
+def test_every_shipped_scenario_validates():
+    from formation.ocp_replay import OcpReplayScenario
+    from formation.replay_scenario import FieldReplayScenario
+    from ocp.config import load_config
+
+    for name in ("replay_two_charges", "replay_isotherm13"):
+        load_config(PROBLEMS / f"{name}.yaml", FieldReplayScenario)
+    load_config(PROBLEMS / "replay_hussein2008.yaml", OcpReplayScenario)
+
+
+def test_field_replay_writes_result_summary_figures_and_animation(tmp_path, capsys):
+    data = shipped("replay_two_charges")
+    data.update(duration=1.0)  # 10 samples: outputs and animation, not the dynamics, are tested here
+    out = tmp_path / "out"
+    assert main(["replay", str(write(tmp_path, data)), "--out", str(out), "--animate"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("final_level_error", "mean_abs_theta_last_quarter", "rms_z_error", "rms_gradient_error",
+                "shape_error_rms_last_half", "simulated_time_per_wall_second"):  # fmt: skip
+        assert key in summary
+    ds = xr.open_dataset(out / "result.nc", engine="h5netcdf")
+    for name in ("z_true", "z_est", "grad_true", "grad_est", "r", "v", "a", "b", "theta"):
+        assert name in ds
+    assert ds.attrs["C"] == 4.0 and ds["r"].dims == ("time", "platform", "xy") and ds.sizes["time"] == 11
+    ds.close()
+    for name in ("paths.png", "z_estimate.png", "shape.png", "heading.png"):
+        assert (out / name).stat().st_size > 0
+    movies = [p for p in out.iterdir() if p.suffix in (".gif", ".mp4")]
+    assert len(movies) == 1 and movies[0].stat().st_size > 0 and movies[0].name in summary["files"]
+    assert not list(out.glob(".*"))  # no temporary files left
+    assert "replay_two_charges" in capsys.readouterr().out
+
+
+def test_shape_from_a_steady_state_summary(tmp_path):
+    formation = {"formation": "cross", "noise": {"sigma_process": 0.02, "sigma_measurement": 0.05,
+                 "sigma_hessian": 0.02}, "bounds": {"a": [0.5, 3.0], "b": [0.5, 3.0]}}  # fmt: skip
+    assert (
+        main(
+            [
+                "steady-state",
+                str(write(tmp_path, formation, "f.yaml")),
+                "--out",
+                str(tmp_path / "ss"),
+                "--no-plot",
+            ]
+        )
+        == 0
+    )
+    design = json.loads((tmp_path / "ss" / "summary.json").read_text())
+    data = shipped("replay_isotherm13")
+    data["formation"]["shape"] = {"summary": "ss/summary.json"}  # relative to the scenario file
+    data.update(duration=0.5)
+    assert main(["replay", str(write(tmp_path, data)), "--out", str(tmp_path / "out"), "--no-plot"]) == 0
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["a0"] == pytest.approx(design["a"], rel=1e-15) and summary["b0"] == pytest.approx(
+        design["b"], rel=1e-15
+    )
+    assert "steady-state summary" in summary["source"]
+
+
+def _set(path: list, value):
+    def apply(data):
+        target = data
+        for key in path[:-1]:
+            target = target[key]
+        target[path[-1]] = value
+        return data
+
+    return apply
+
+
+def _delete(path: list):
+    def apply(data):
+        target = data
+        for key in path[:-1]:
+            target = target[key]
+        del target[path[-1]]
+        return data
+
+    return apply
+
+
+BAD = [
+    ("replay_isotherm13", _set(["motion", "levl"], 3.0), "motion.levl: unknown key; did you mean 'level'"),
+    (
+        "replay_isotherm13",
+        _set(["formation", "kind"], "crosss"),
+        "formation.kind: unknown formation 'crosss'",
+    ),
+    (
+        "replay_isotherm13",
+        _set(["formation", "gains", "stiffness"], -1.0),
+        "formation.gains.stiffness: expected a number > 0",
+    ),
+    (
+        "replay_isotherm13",
+        _set(["platforms", "count"], 3),
+        "formation.kind: the cross needs platforms.count = 4",
+    ),
+    (
+        "replay_isotherm13",
+        _set(["platforms", "initial", "velocity"], [0.0, 0.0]),
+        "platforms.initial.velocity: expected a nonzero",
+    ),
+    (
+        "replay_isotherm13",
+        _set(["field", "kind"], "ocean_temp"),
+        "field.kind: unknown field kind 'ocean_temp'",
+    ),
+    (
+        "replay_isotherm13",
+        _set(["formation", "shape"], {"summary": "missing.json"}),
+        "missing.json: file not found",
+    ),
+    (
+        "replay_isotherm13",
+        _set(["formation", "shape"], {"a": 1.0}),
+        "formation.shape.b: a fixed shape needs both",
+    ),
+    ("replay_isotherm13", _delete(["filter"]), "filter: required key is missing"),
+    ("replay_isotherm13", _set(["time_step"], 100.0), "time_step: expected 1"),
+    (
+        "replay_two_charges",
+        _set(["formation"], {"kind": "rigid", "offsets": [[-0.5, 0], [0.5, 0]]}),
+        "collinear rigid",
+    ),
+    ("replay_two_charges", _set(["formation", "offsets"], [[0, 0]]), "formation.offsets: expected 2 offsets"),
+    (
+        "replay_two_charges",
+        _set(["filter", "hessian"], "curvature"),
+        "filter.hessian: curvature needs the four-platform cross",
+    ),
+    (
+        "replay_two_charges",
+        _set(["motion", "level"], -1.0),
+        "motion.level: the reciprocal level function needs C > 0",
+    ),
+    ("replay_two_charges", _delete(["field"]), "expected a field replay (key 'field')"),
+]
+
+
+@pytest.mark.parametrize("name,mutate,expected", BAD, ids=[e for _, _, e in BAD])
+def test_invalid_scenarios_exit_2_with_the_key_path_and_write_nothing(
+    tmp_path, capsys, name, mutate, expected
+):
+    path = write(tmp_path, mutate(copy.deepcopy(shipped(name))))
+    out = tmp_path / "out"
+    assert main(["replay", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert expected in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
