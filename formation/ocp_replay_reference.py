@@ -19,6 +19,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from formation.shape_control import FixedShapeController
+
 if TYPE_CHECKING:
     from ocp.solution import Solution
 
@@ -107,8 +109,8 @@ class ReferenceTrajectory:
 
 
 @dataclass(frozen=True)
-class TrackingController:
-    """PD tracking with feed-forward of a reference trajectory.
+class TrackingController(FixedShapeController):
+    """PD tracking with feed-forward of a reference trajectory: the shape controller's law applied to positions.
 
     Parameters
     ----------
@@ -118,16 +120,9 @@ class TrackingController:
         ``Kd`` (1/T).
     """
 
-    stiffness: float
-    damping: float
-
-    def __post_init__(self) -> None:
-        if not (self.stiffness > 0 and self.damping > 0):
-            raise ValueError(f"stiffness and damping must be > 0, got {self.stiffness}, {self.damping}")
-
-    def __call__(
+    def __call__(  # type: ignore[override]
         self, position: np.ndarray, velocity: np.ndarray, reference: tuple[np.ndarray, np.ndarray, np.ndarray]
     ) -> np.ndarray:
         """Acceleration ``u_ref + Kp (p_ref − r) + Kd (v_ref − r')``, shape of ``position``."""
         p_ref, v_ref, u_ref = reference
-        return u_ref + self.stiffness * (p_ref - position) + self.damping * (v_ref - velocity)
+        return super().__call__(position, velocity, p_ref, v_ref, u_ref)
