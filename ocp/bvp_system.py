@@ -3,19 +3,30 @@
 Everything is derived with CasADi from the model's own functions (:class:`ocp.model.SensorKalmanModel`):
 no adjoint is written by hand.
 
+Homotopy family (our choice, documented)
+----------------------------------------
+SPEC §1.3 (the paper's eq. 23) divides the whole running cost by ε. Its ε → 0 limit is the classical
+Kalman filter (u ≡ 0) only when K = 0 and the terminal sensor state is free; otherwise it is the
+nonlinear problem min ∫(α/2|u|² + Tr KΣ) — no longer a Kalman filter to start from. The indirect method
+therefore divides only the control energy by ε, and moves fixed terminal states from the coasting end
+point to their targets:
+
+    J_ε = Tr[M Σ(tf)] + ∫ (α/(2ε) |u|² + Tr[K Σ]) dt,    x_k(tf) = (1 − ε) x_k^coast(tf) + ε x_k^target.
+
+For K = 0 and free terminal states (the paper's example) this *is* eq. 23; at ε = 0 it is exactly the
+Kalman filter with coasting sensors for every problem; at ε = 1 it is problem II.1.
+
 Continuation variable
 ---------------------
-SPEC §1.4 writes ``H = L/ε + λ'f`` with λ the costate of J_ε (``L = α/2|u|² + Tr KΣ``). We solve instead
-for the costate ``μ = ε λ`` of ``ε J_ε = ε Φ + ∫ L`` (``Φ = Tr[M Σ(tf)]``), with the Hamiltonian
+We solve for the costate ``μ = ε λ`` of ``ε J_ε`` (λ the costate of J_ε, SPEC §1.4) with
 
-    H̃(x, u, μ) = L(x, u) + μ'f(x, u) = ε H                                   (SPEC §1.4 times ε)
-    u* = argmin_u H̃ = −(1/α) B_s' μ = −(ε/α) B_s' λ                          (SPEC §1.3)
-    x' = ∂H̃/∂μ = f(x, u*),   μ' = −∂H̃/∂x |_{u*}                             (SPEC §1.4)
-    x(t0) = x0,   μ_k(tf) = ε ∂Φ/∂x_k (free components),  x_k(tf) = target_k (fixed components).
+    H̃(x, u, μ) = α/2|u|² + ε Tr[K Σ] + μ'f(x, u) = ε H                         (SPEC §1.4 times ε)
+    u* = argmin_u H̃ = −(1/α) B_s' μ = −(ε/α) B_s' λ                              (SPEC §1.3)
+    x' = ∂H̃/∂μ = f(x, u*),   μ' = −∂H̃/∂x |_{u*}                                 (SPEC §1.4)
+    x(t0) = x0,   μ_k(tf) = ε ∂Φ/∂x_k (free components),   x_k(tf) as above (fixed components).
 
-The differential equations do not depend on ε at all; ε only scales the terminal costate. This is the
-same scaling the direct transcription uses (objective ε Φ + ∫ L) and it keeps every unknown bounded as
-ε → 0 (for K = 0, μ → 0 and u → 0: the coasting Kalman filter). λ = μ / ε is reported.
+Every unknown stays bounded as ε → 0, and ε = 0 is solved exactly by the coasting states with μ ≡ 0
+(the homogeneous adjoint). λ = μ / ε is reported.
 
 The minimiser u* is obtained by AD too: H̃ is quadratic in u (control-affine f, quadratic L), so one
 Newton step from u = 0, ``u* = −(∂²H̃/∂u²)⁻¹ ∂H̃/∂u|_{u=0}``, is exact; the constructor checks that the
@@ -32,15 +43,15 @@ solvers see O(1) numbers.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import casadi as ca
 import numpy as np
 
 from ocp.config import ConfigError
 from ocp.model import SensorKalmanModel, Structure, diagonal_indices, vec_to_sym
-from ocp.problem import Problem
 
-__all__ = ["HamiltonianSystem", "costate_matrix", "costate_vector"]
+__all__ = ["HamiltonianSystem", "hamiltonian_system", "costate_matrix", "costate_vector"]
 
 
 def costate_matrix(mu_sigma: np.ndarray, n: int) -> np.ndarray:
@@ -93,10 +104,11 @@ class HamiltonianSystem:
     """
 
     def __init__(self, structure: Structure) -> None:
-        if any(structure.bounded_control):
+        if any(structure.bounded_control):  # also rejected when the problem is validated (ocp.problem)
             raise ConfigError(
-                "sensors[].u_max: the indirect method does not support control bounds (u* would be a "
-                "non-smooth saturation); remove u_max or use solver.method 'direct'"
+                f"sensors[{structure.bounded_control.index(True)}].u_max: expected no control bound with the "
+                "indirect method (its control law would be a non-smooth saturation); remove u_max or use "
+                "solver.method 'direct'"
             )
         self.structure = s = structure
         self.model = m = SensorKalmanModel(structure)
@@ -109,8 +121,9 @@ class HamiltonianSystem:
         P = ca.SX.sym("P", self.layout.size)
         b = self.layout.unpack(P)
 
-        # SPEC §1.4 (times ε): H̃ = L + μ'f
-        H = m.running(x, u, P)[0] + ca.dot(mu, m.f(x, u, P))
+        # SPEC §1.4 times ε, energy-only homotopy: H̃ = α/2|u|² + ε Tr KΣ + μ'f, with running = [L, α/2|u|²]
+        L = m.running(x, u, P)
+        H = L[1] + b["eps"] * (L[0] - L[1]) + ca.dot(mu, m.f(x, u, P))
         dHdu = ca.gradient(H, u)
         Huu = ca.hessian(H, u)[0]
         if ca.depends_on(Huu, ca.vertcat(u, x, mu)):
@@ -162,10 +175,21 @@ class HamiltonianSystem:
         """Residual of component k at tf: fixed value (scaled like x_k) or transversality (scaled like μ_k)."""
         nx = self.structure.nx
         if self.fixed_terminal[k]:
+            # x_k(tf) = (1 − ε) x_k^coast(tf) + ε x_k^target; g_T is affine, so this is g_T(x) − (1 − ε) g_T(x^coast)
             g_T, _ = self.model.terminal_constraints(xb, P)
-            return g_T[self._constraint_row[k]]
+            g_coast, _ = self.model.terminal_constraints(self._coasting_end(P, b), P)
+            row = self._constraint_row[k]
+            return g_T[row] - (1 - b["eps"]) * g_coast[row]
         dPhi = self.terminal_gradient(xb, P)
         return (mub[k] - b["eps"] * dPhi[k]) / D[nx + k]  # SPEC §1.4: λ(tf) = ∂Φ/∂x(tf), times ε
+
+    def _coasting_end(self, P: ca.SX, b: dict) -> ca.SX:
+        """State at tf of the coasting sensors (u ≡ 0): p0 + v0 (tf − t0), v0 (Σ entries: Σ0, unused)."""
+        s = self.structure
+        x0 = self.model.x0(P)
+        p0 = x0[s.n_sigma : s.n_sigma + 2 * s.N]
+        v0 = x0[s.n_sigma + 2 * s.N :]
+        return ca.vertcat(x0[: s.n_sigma], p0 + v0 * (b["tf"] - b["t0"]), v0)
 
     # ------------------------------------------------------------------ numeric evaluation
     def _map(self, name: str, m: int) -> ca.Function:
@@ -199,8 +223,8 @@ class HamiltonianSystem:
         return self._f
 
     # ------------------------------------------------------------------ helpers
-    def default_scales(self, problem: Problem, y_guess: np.ndarray, P: np.ndarray) -> np.ndarray:
-        """Scales D (2nx,) of y = [x, μ]: the largest |y_k| of the guess, floored by the model's scales.
+    def default_scales(self, y_guess: np.ndarray, P: np.ndarray) -> np.ndarray:
+        """Scales D (2nx,) of y = [x, μ] from a guess ``y_guess`` (2nx, T) and the parameters ``P``.
 
         States use max(model scale, max_t |x_k|). Costates of quantities that vary over orders of
         magnitude (Λ spans 1e-5…20 on the default problem) are scaled by their largest value, floored at
@@ -222,3 +246,9 @@ class HamiltonianSystem:
     def diagonal_sigma(self) -> list[int]:
         """Indices of the diagonal Σ entries in x."""
         return diagonal_indices(self.structure.n)
+
+
+@lru_cache(maxsize=16)
+def hamiltonian_system(structure: Structure) -> HamiltonianSystem:
+    """The (cached) :class:`HamiltonianSystem` of ``structure``."""
+    return HamiltonianSystem(structure)

@@ -50,6 +50,7 @@ __all__ = [
     "Cost",
     "CollocationOptions",
     "HomotopyOptions",
+    "BVPOptions",
     "SolverOptions",
     "Problem",
     "load_problem",
@@ -140,12 +141,37 @@ class HomotopyOptions(StrictModel):
     growth: float = Field(2.0, ge=1.0, le=10.0)
 
 
+class BVPOptions(StrictModel):
+    """Indirect method (SPEC §1.4): BVP solver of the ε-continuation and of the direct-seeded refinement.
+
+    ``collocation`` uses the scheme and degree of ``solver.collocation`` on ``intervals`` uniform intervals
+    (default: ``solver.collocation.intervals``), Newton to ``tolerance`` (max-norm of the scaled residual),
+    and arclength continuation; ``scipy`` is ``scipy.integrate.solve_bvp`` to ``scipy_tolerance``. With
+    ``polish`` the collocation result at ε = 1 is re-solved by ``solve_bvp`` on an adaptive mesh.
+    """
+
+    solver: Literal["collocation", "scipy"] = "collocation"
+    refine_solver: Literal["scipy", "collocation"] = Field(
+        "scipy", description="solver of the direct-seeded refinement (method 'both')"
+    )
+    intervals: int | None = Field(None, ge=2, le=100_000)
+    tolerance: float = Field(1e-10, gt=0.0, lt=1e-2)
+    newton_iterations: int = Field(50, ge=1)
+    max_arclength_steps: int = Field(400, ge=1)
+    scipy_tolerance: float = Field(1e-8, gt=0.0, lt=1e-2, description="solve_bvp tol (relative residual)")
+    max_nodes: int = Field(20_000, ge=10, description="solve_bvp mesh limit (bounds the time of a failing step)")
+    polish: bool = Field(
+        True, description="re-solve the collocation result at ε = 1 with solve_bvp (adaptive mesh to scipy_tolerance)"
+    )
+
+
 class SolverOptions(StrictModel):
     """How to solve: method, transcription, homotopy and Ipopt tolerances."""
 
     method: Literal["direct", "indirect", "both"] = "direct"
     collocation: CollocationOptions = CollocationOptions()
     homotopy: HomotopyOptions = HomotopyOptions()
+    bvp: BVPOptions = BVPOptions()
     tolerance: float = Field(1e-9, gt=0.0, lt=1e-2, description="Ipopt tol (scaled NLP error)")
     max_iterations: int = Field(500, ge=1)
     time_limit: float | None = Field(None, gt=0.0, description="wall-clock limit of each Ipopt solve (s)")
@@ -171,6 +197,13 @@ class Problem(StrictModel):
         for i, sensor in enumerate(self.sensors):
             if names.index(sensor.name) != i:
                 raise InvalidValue(f"sensors[{i}].name", f"duplicate sensor name {sensor.name!r}")
+            if sensor.u_max is not None and self.solver.method != "direct":
+                raise InvalidValue(
+                    f"sensors[{i}].u_max",
+                    f"expected no control bound with solver.method {self.solver.method!r} (got {sensor.u_max:g}): "
+                    "the indirect method's control law would be a non-smooth saturation; "
+                    "remove u_max or use method 'direct'",
+                )
             if sensor.measures is not None:
                 rows = np.asarray(sensor.measures, dtype=float)
                 if rows.shape[1] != n:

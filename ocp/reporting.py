@@ -31,6 +31,8 @@ class SolveReporter:
             return solve(self.problem, method)
         h = self.problem.solver.homotopy
         total = 1 if h.mode == "none" else (round(1 / h.step) if h.mode == "fixed" else None)
+        if total is not None and method == "both":
+            total *= 2  # the direct, then the indirect continuation
         with Progress(
             TextColumn("[bold]{task.description}"),
             BarColumn(),
@@ -70,11 +72,15 @@ class SolveReporter:
             table.add_row("improvement", f"{s['improvement_percent']:.2f} %")
         if steps:
             table.add_row("homotopy steps", f"{len(steps)} (ε reached {solution.eps:g})")
-            table.add_row("Ipopt iterations", f"{sum(x.iterations for x in steps)} (first step {steps[0].iterations})")
+            solver = "Newton" if solution.method == "indirect" else "Ipopt"
+            table.add_row(
+                f"{solver} iterations", f"{sum(x.iterations for x in steps)} (first step {steps[0].iterations})"
+            )
             table.add_row("solve time", f"{s['solve_time_s']:.3f} s (first step {steps[0].time_s:.3f} s)")
         if "build_time_s" in s:
             table.add_row("transcription build", f"{s['build_time_s']:.3f} s")
         table.add_row("min eig Σ(t)", f"{s['min_sigma_eigenvalue']:.4g}")
+        self._indirect_rows(table, s)
         multistart = s.get("multistart")
         if multistart:
             costs = ", ".join(f"{g['cost']:.8g} (×{len(g['starts'])})" for g in multistart["optima"])
@@ -85,3 +91,38 @@ class SolveReporter:
             )
         table.add_row("output", str(out))
         self.console.print(table)
+
+    @staticmethod
+    def _indirect_rows(table: Table, s: dict) -> None:
+        """Rows of the indirect continuation, the direct-seeded refinement and the agreement (if present)."""
+        indirect = s.get("indirect")
+        if indirect:
+            folds = ", ".join(f"{f:.4g}" for f in indirect["folds"]) or "none"
+            table.add_row(
+                "indirect (PMP BVP)",
+                f"J = {indirect['cost']:.10g}, {indirect['status']}, {indirect['time_s']:.3f} s, "
+                f"{indirect['nodes']} nodes ({indirect['solver']})",
+            )
+            table.add_row("  continuation", f"{indirect['arclength_steps']} arclength steps; folds at ε = {folds}")
+        seeded = s.get("seeded")
+        if seeded:
+            table.add_row(
+                "direct-seeded BVP",
+                f"J = {seeded['cost']:.10g}, {seeded['status']}, {seeded['time_s']:.3f} s, "
+                f"{seeded['nodes']} nodes ({seeded['solver']})",
+            )
+        agreement = s.get("agreement")
+        if agreement:
+            table.add_row("agreement: cost (relative)", f"{agreement['cost_rel_diff']:.2e}")
+            table.add_row(
+                "  max state / control / costate",
+                f"{agreement['max_state_diff']:.2e} / {agreement['max_control_diff']:.2e} / "
+                f"{agreement['max_costate_diff']:.2e}",
+            )
+        for method, residuals in (s.get("optimality") or {}).items():
+            if residuals:
+                table.add_row(
+                    f"  {method}: |∂H/∂u|, transv., ΔH",
+                    f"{residuals['dH_du']:.1e}, {residuals['transversality']:.1e}, "
+                    f"{residuals['hamiltonian_variation']:.1e}",
+                )

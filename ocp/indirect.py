@@ -1,0 +1,325 @@
+"""Solve the mobile-sensor Kalman problem by the indirect method: the PMP boundary-value problem (SPEC §1.4).
+
+``solve_indirect(problem)`` does what the source paper does: start from the classical Kalman filter
+(ε = 0: sensors coast, Σ from the Riccati IVP, costates from the adjoint equations integrated backwards),
+continue in ε with the schedule of ``solver.homotopy`` (:func:`ocp.homotopy.run_continuation`) and the
+BVP solver of ``solver.bvp`` (:mod:`ocp.bvp_solvers`), and return a :class:`~ocp.solution.Solution`
+whose ``stats`` carry the ``indirect`` block and the optimality residuals. ``refine_from_direct`` solves
+the BVP at ε = 1 from a direct solution's states and multiplier costates instead.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from scipy.integrate import solve_ivp
+from scipy.interpolate import CubicSpline
+
+from ocp.bvp_residuals import optimality_residuals, solution_states_costates
+from ocp.bvp_solvers import BVP_SOLVERS, BVPSolution, BVPSolver, Guess
+from ocp.bvp_system import HamiltonianSystem, costate_matrix, hamiltonian_system
+from ocp.homotopy import run_continuation
+from ocp.model import Structure, vec_to_sym
+from ocp.problem import Problem
+from ocp.simulate import Trajectory, integrate
+from ocp.solution import HomotopyStep, Solution
+
+__all__ = [
+    "solve_indirect",
+    "indirect_continuation",
+    "refine_from_direct",
+    "kalman_guess",
+    "solution_from_bvp",
+    "indirect_summary",
+    "make_bvp_solver",
+]
+
+
+def kalman_guess(
+    system: HamiltonianSystem, problem: Problem, values: dict[str, Any], samples: int = 401
+) -> tuple[Callable[[float], Guess], Trajectory]:
+    """The ε → 0 guess: coasting sensors, Σ from the Riccati IVP, μ from the backward adjoint.
+
+    Returns ``guess_at(eps)`` — a function giving y(t) = [x(t); μ(t)] with μ the solution of the adjoint
+    equation ``μ' = −∂H̃/∂x`` at u = 0 along the coasting states, ``μ(tf) = ε ∂Φ/∂x`` on the free
+    components (0 on fixed ones) — and the coasting trajectory (the no-control baseline).
+    """
+    t0, tf = problem.horizon.t0, problem.horizon.tf
+    P = system.layout.pack(values)
+    t = np.linspace(t0, tf, samples)
+    coasting = integrate(system.model, P, t)
+    x_of_t = CubicSpline(t, coasting.x)
+    zero = np.zeros(system.structure.nu)
+    free = ~system.fixed_terminal
+    dPhi = np.asarray(system.terminal_gradient(coasting.x[-1], P)).ravel()
+    scale = float(np.abs(dPhi).max())  # > 0: M is positive definite
+
+    def guess_at(eps: float) -> Guess:
+        Pe = system.layout.pack({**values, "eps": eps})
+        mu_T = eps * dPhi * free
+        adjoint = solve_ivp(
+            lambda tt, mu: np.asarray(system.costate_rhs(x_of_t(tt), zero, mu, Pe)).ravel(),
+            (tf, t0),
+            mu_T,
+            dense_output=True,
+            method="DOP853",
+            rtol=1e-10,
+            atol=1e-12 * scale,
+        )
+
+        def guess(times: np.ndarray) -> np.ndarray:
+            return np.vstack([x_of_t(times).T, adjoint.sol(times)])
+
+        return guess
+
+    return guess_at, coasting
+
+
+def _direct_guess(direct: Solution) -> Guess:
+    """y(t) from a direct solution: states on its grid, multiplier costates on its costate grid (linear)."""
+    if direct.Lam is None:
+        raise ValueError("the direct solution carries no costates (it did not converge at any ε)")
+    x, lam = solution_states_costates(direct)
+    mu = direct.eps * lam  # μ = ε λ
+
+    def guess(times: np.ndarray) -> np.ndarray:
+        xs = [np.interp(times, direct.t, x[:, k]) for k in range(x.shape[1])]
+        mus = [np.interp(times, direct.t_costate, mu[:, k]) for k in range(mu.shape[1])]
+        return np.array(xs + mus)
+
+    return guess
+
+
+def make_bvp_solver(problem: Problem, name: str, guess: Guess) -> BVPSolver:
+    """BVP solver ``name`` for ``problem``, with the scales of the unknowns taken from ``guess``.
+
+    Parameters
+    ----------
+    problem : Problem
+    name : str
+        Key of :data:`ocp.bvp_solvers.BVP_SOLVERS` (``"collocation"`` or ``"scipy"``).
+    guess : callable
+        times (T,) -> y = [x; μ] (2 nx, T), sampled at 401 points for
+        :meth:`~ocp.bvp_system.HamiltonianSystem.default_scales`.
+    """
+    system = hamiltonian_system(Structure.of(problem))
+    values = system.layout.values(problem)
+    P = system.layout.pack(values)
+    times = np.linspace(problem.horizon.t0, problem.horizon.tf, 401)
+    scales = system.default_scales(guess(times), P)
+    return BVP_SOLVERS[name](problem, values, scales)
+
+
+def refine_from_direct(direct: Solution, solver: str | None = None) -> BVPSolution:
+    """Solve the BVP at ε = 1 starting from ``direct`` (states + multiplier costates).
+
+    Parameters
+    ----------
+    direct : Solution
+        A converged direct solution (ε = 1).
+    solver : str, optional
+        Name in :data:`ocp.bvp_solvers.BVP_SOLVERS` (default ``solver.bvp.refine_solver``).
+    """
+    problem = direct.problem
+    guess = _direct_guess(direct)
+    bvp = make_bvp_solver(problem, solver or problem.solver.bvp.refine_solver, guess)
+    if bvp.name == "scipy":
+        return bvp.solve(1.0, guess, mesh=direct.t)
+    return bvp.solve(1.0, guess)
+
+
+def solution_from_bvp(problem: Problem, bvp: BVPSolution, method: str = "indirect") -> Solution:
+    """A :class:`Solution` (states, controls, PMP costates λ = μ/ε on the BVP nodes) from a BVP solution."""
+    system = hamiltonian_system(Structure.of(problem))
+    s = system.structure
+    n, N, nx = s.n, s.N, s.nx
+    P = system.layout.pack({**system.layout.values(problem), "eps": bvp.eps})
+    x, mu = bvp.y[:nx].T, bvp.y[nx:].T
+    u = np.asarray(system.control.map(bvp.nodes)(x.T, mu.T, P)).T
+    solution = Solution(
+        problem=problem,
+        method=method,
+        status="solved" if bvp.success and bvp.eps == 1.0 else "failed",
+        message=bvp.message,
+        eps=bvp.eps,
+        t=bvp.t,
+        Sigma=vec_to_sym(x[:, : s.n_sigma], n),
+        p=x[:, s.n_sigma : s.n_sigma + 2 * N].reshape(-1, N, 2),
+        v=x[:, s.n_sigma + 2 * N :].reshape(-1, N, 2),
+        t_u=bvp.t,
+        u=u.reshape(-1, N, 2),
+        terminal_cost=bvp.terminal_cost,
+        running_cost=bvp.running_cost,
+        control_energy=bvp.control_energy,
+    )
+    if bvp.eps > 0:  # λ = μ/ε (at ε = 0 only μ ≡ 0 is defined)
+        lam = mu / bvp.eps
+        solution.t_costate = bvp.t
+        solution.Lam = costate_matrix(lam[:, : s.n_sigma], n)
+        solution.lam_p = lam[:, s.n_sigma : s.n_sigma + 2 * N].reshape(-1, N, 2)
+        solution.lam_v = lam[:, s.n_sigma + 2 * N :].reshape(-1, N, 2)
+    return solution
+
+
+def indirect_summary(bvp: BVPSolution, solver: str, time_s: float, records: list[dict[str, Any]]) -> dict[str, Any]:
+    """The ``indirect`` block of summary.json (costs at ε = 1, status, time, nodes, homotopy record).
+
+    ``curve`` lists ε and Tr Σ(tf) at every accepted point of the arclength continuation (collocation
+    solver): plotted against each other they show the folds of the solution curve.
+    """
+    return {
+        "solver": solver,
+        "cost": bvp.terminal_cost + bvp.running_cost,
+        "terminal_cost": bvp.terminal_cost,
+        "control_energy": bvp.control_energy,
+        "status": "solved" if bvp.success and bvp.eps == 1.0 else "failed",
+        "message": bvp.message,
+        "eps_reached": bvp.eps,
+        "time_s": time_s,
+        "nodes": bvp.nodes,
+        "homotopy": [{k: v for k, v in r.items() if k != "curve"} for r in records],
+        "folds": _distinct([f for r in records for f in r.get("folds", [])]),
+        "newton_iterations": int(sum(r["iterations"] for r in records)),
+        "arclength_steps": int(sum(r.get("arclength_steps", 0) for r in records)),
+        "curve": {
+            key: [v for r in records if r["status"] == "converged" for v in r.get("curve", {}).get(key, [])]
+            for key in ("eps", "trace_sigma_tf")
+        },
+    }
+
+
+def _distinct(values: list[float], rtol: float = 1e-6) -> list[float]:
+    """Sorted (descending) values without near-duplicates (a fold passed again after a retried ε step)."""
+    out: list[float] = []
+    for value in sorted(values, reverse=True):
+        if not out or abs(out[-1] - value) > rtol * abs(value):
+            out.append(value)
+    return out
+
+
+def solve_indirect(problem: Problem, progress: Callable[[HomotopyStep], None] | None = None) -> Solution:
+    """Solve ``problem`` by the indirect method with ε-continuation from the Kalman solution.
+
+    See :func:`indirect_continuation`, which also returns the dense BVP solution.
+    """
+    return indirect_continuation(problem, progress)[0]
+
+
+def indirect_continuation(
+    problem: Problem, progress: Callable[[HomotopyStep], None] | None = None
+) -> tuple[Solution, BVPSolution]:
+    """Solve ``problem`` by the indirect method; return the Solution and the final BVP solution.
+
+    Parameters
+    ----------
+    problem : Problem
+        Its ``solver.homotopy`` gives the ε schedule, ``solver.bvp`` the BVP solver and tolerances.
+    progress : callable, optional
+        Called with a :class:`HomotopyStep` after every ε step (``iterations`` = Newton iterations of
+        the collocation solver, or ``solve_bvp`` iterations).
+
+    Returns
+    -------
+    solution : Solution
+        ``method="indirect"``; ``status="solved"`` when ε = 1 was reached, else ``"failed"`` with the
+        last ε solved. ``stats["indirect"]`` holds the homotopy record (ε, status, nodes, time, folds
+        passed) and ``stats["optimality"]["indirect"]`` the residuals of the necessary conditions.
+    bvp : BVPSolution
+        The last accepted BVP solution (dense ``evaluate``).
+    """
+    t_start = time.perf_counter()
+    system = hamiltonian_system(Structure.of(problem))
+    values = system.layout.values(problem)
+    guess_at, coasting = kalman_guess(system, problem, values)
+    name = problem.solver.bvp.solver
+    bvp = make_bvp_solver(problem, name, guess_at(1.0))
+    start = bvp.solve(0.0, guess_at(0.0))
+    steps: list[HomotopyStep] = []
+    records: list[dict[str, Any]] = [_record(start)]
+    accepted: list[BVPSolution] = []
+    state = {"current": start}
+
+    def attempt(eps: float) -> bool:
+        result = bvp.follow(state["current"], eps)
+        status = "converged" if result.success else result.message
+        step = HomotopyStep(eps, result.cost_eps, result.iterations, status, result.time_s, result.success)
+        steps.append(step)
+        records.append({**_record(result), "eps": eps})
+        if progress is not None:
+            progress(step)
+        if result.success:
+            state["current"] = result
+            accepted.append(result)
+        return result.success
+
+    if start.success:
+        run_continuation(attempt, problem.solver.homotopy)
+    final = state["current"]
+    polish = None
+    if final.eps == 1.0 and bvp.name != "scipy" and problem.solver.bvp.polish:
+        final, polish = _polish(problem, bvp, final)
+    elapsed = time.perf_counter() - t_start
+    solution = solution_from_bvp(problem, final)
+    solution.homotopy = steps
+    if not start.success:
+        solution.message = f"the ε = 0 (Kalman) BVP did not converge: {start.message}"
+    elif final.eps < 1.0:
+        solution.message = f"continuation stopped at ε = {final.eps:g}: {steps[-1].status}"
+    solution.baseline = {
+        "cost": coasting.cost,
+        "terminal_cost": coasting.terminal_cost,
+        "running_cost": coasting.running_cost,
+    }
+    if accepted:
+        solution.path_eps = np.array([r.eps for r in accepted])
+        paths = [r.evaluate(final.t) for r in accepted]
+        s = system.structure
+        solution.path_p = np.stack([y[s.n_sigma : s.n_sigma + 2 * s.N].T.reshape(-1, s.N, 2) for y in paths])
+        solution.path_Sigma = np.stack([vec_to_sym(y[: s.n_sigma].T, s.n) for y in paths])
+    summary = indirect_summary(final, name, elapsed, records)
+    if polish is not None:
+        summary["polish"] = polish
+    solution.stats = {
+        "indirect": summary,
+        "optimality": {"indirect": optimality_residuals(solution)},
+        "total_time_s": elapsed,
+    }
+    return solution, final
+
+
+def _polish(problem: Problem, solver: BVPSolver, solution: BVPSolution) -> tuple[BVPSolution, dict[str, Any]]:
+    """Re-solve at ε = 1 with ``solve_bvp`` (residual control, adaptive mesh) from a collocation solution.
+
+    Returns the polished solution if it converged (else ``solution``) and a report whose ``cost_change``
+    (relative) estimates the discretisation error of the uniform collocation mesh.
+    """
+    scipy_solver = BVP_SOLVERS["scipy"](problem, solver.values, solver.D)
+    polished = scipy_solver.solve(1.0, solution)
+    cost = solution.terminal_cost + solution.running_cost
+    report = {
+        "solver": "scipy",
+        "status": "converged" if polished.success else polished.message,
+        "nodes": polished.nodes,
+        "time_s": polished.time_s,
+        "cost_change": abs(polished.terminal_cost + polished.running_cost - cost) / abs(cost),
+        "collocation_cost": cost,
+    }
+    if not polished.success:
+        return solution, report
+    polished.message = f"{solution.message}; polished by solve_bvp ({polished.nodes} nodes)"
+    return polished, report
+
+
+def _record(result: BVPSolution) -> dict[str, Any]:
+    """One homotopy record of the summary: ε, status, nodes, time, iterations (+ arclength details)."""
+    return {
+        "eps": result.eps,
+        "status": "converged" if result.success else result.message,
+        "nodes": result.nodes,
+        "time_s": result.time_s,
+        "iterations": result.iterations,
+        **{k: v for k, v in result.report.items() if k in ("arclength_steps", "rejected_steps", "folds", "curve")},
+    }
