@@ -24,12 +24,15 @@ from ocp.model import SensorKalmanModel, Structure, diagonal_indices
 
 __all__ = ["DirectCollocation", "NLPResult", "IPOPT_DEFAULTS", "COLD_START", "WARM_START"]
 
-#: Ipopt options used by default. MUMPS' matching-based permutation and scaling are switched off: on these
-#: banded collocation KKT systems they cost far more than they save (see benchmarks/bench_direct.py).
+#: Ipopt options used by default. MUMPS' matching-based permutation and scaling are switched off and the
+#: fill-reducing ordering is AMD: on these banded collocation KKT systems that is the fastest combination
+#: measured (benchmarks/bench_direct.py: default problem and K up to 400; every homotopy step re-runs the
+#: symbolic analysis, where METIS, MUMPS' automatic choice, costs most).
 IPOPT_DEFAULTS: dict[str, Any] = {
     "linear_solver": "mumps",
     "mumps_permuting_scaling": 0,
     "mumps_scaling": 0,
+    "mumps_pivot_order": 0,
     "print_level": 0,
     "sb": "yes",
 }
