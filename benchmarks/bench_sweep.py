@@ -66,6 +66,7 @@ def parallel(items: list[dict], workers: int, warm_start: bool) -> tuple[float, 
             [{"problem": i["problem"]} for i in items],
             lambda i, r: rows.append(r["row"]),
             coordinates=[i["coords"] for i in items],
+            warm_start=warm_start,
         )
         wall = time.perf_counter() - t1
     return startup, wall, rows

@@ -65,6 +65,7 @@ def open_client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
     """A dask Client: on ``scheduler`` (``tcp://…``) or on a LocalCluster of ``workers`` processes."""
     import os
 
+    import dask
     from dask.distributed import Client, LocalCluster
 
     if scheduler:
@@ -72,7 +73,10 @@ def open_client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
             yield client
         return
     n = workers or os.cpu_count() or 1
+    # dask sets MALLOC_TRIM_THRESHOLD_ in its workers, which also freezes glibc's mmap threshold: MUMPS' large
+    # per-factorisation workspaces then go through mmap/munmap and page faults. Unset it for our workers.
     with (
+        dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}),
         LocalCluster(
             n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=50
         ) as cluster,
