@@ -12,23 +12,14 @@
 from __future__ import annotations
 
 import argparse
-import time
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
+from timing import best_time
 
 from estimation.cooperative_filter import _model_sequence, run_cooperative_filter
 from estimation.information_model import cross_formation
 from estimation.noise_config import CooperativeNoise
-
-
-def best_time(fn, repeats: int = 3) -> float:  # noqa: ANN001
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
 
 
 def problem(K: int, rng: np.random.Generator):  # noqa: ANN201

@@ -16,11 +16,11 @@
 from __future__ import annotations
 
 import math
-import time
 from pathlib import Path
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
+from timing import best_time
 
 from estimation.range_ring import KHEPERA_MOUNT_ANGLES_DEG, KHEPERA_PAIRS, RangeSensorRing
 from estimation.switching_kalman import C_POSITION, SwitchingKalmanFilter, random_walk_model
@@ -30,15 +30,6 @@ from ocp.config import load_config
 
 PROBLEMS = Path(__file__).resolve().parent.parent / "problems"
 H, Q_STD = 0.01, 1.0
-
-
-def best_time(fn, repeats: int = 3) -> float:  # noqa: ANN001
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
 
 
 def sweep(field_of_view_deg: float, steps: int = 3000):  # noqa: ANN201
