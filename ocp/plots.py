@@ -125,7 +125,7 @@ def plot_homotopy(solution: Solution):  # noqa: ANN201
     ax.set_title("homotopy path")
     ax2 = ax.twinx()
     ax2.bar([s.eps for s in steps], [s.iterations for s in steps], width=0.02, alpha=0.3, color="grey")
-    ax2.set_ylabel("Ipopt iterations")
+    ax2.set_ylabel("Newton iterations (BVP)" if solution.method == "indirect" else "Ipopt iterations")
     ax.legend(loc="upper right")
     return fig
 
