@@ -15,7 +15,15 @@ from collections.abc import Callable
 
 from ocp.problem import HomotopyOptions
 
-__all__ = ["run_continuation"]
+__all__ = ["run_continuation", "fixed_schedule"]
+
+
+def fixed_schedule(step: float) -> list[float]:
+    """ε = δ, 2δ, …, 1 (the last step shorter when 1/δ is not an integer)."""
+    steps = max(1, round(1.0 / step))
+    if abs(steps * step - 1.0) > 1e-9:
+        steps = int(1.0 / step) + 1
+    return [min(1.0, round(k * step, 12)) for k in range(1, steps + 1)]
 
 
 def run_continuation(attempt: Callable[[float], bool], options: HomotopyOptions) -> float:
@@ -23,12 +31,8 @@ def run_continuation(attempt: Callable[[float], bool], options: HomotopyOptions)
     if options.mode == "none":
         return 1.0 if attempt(1.0) else 0.0
     if options.mode == "fixed":
-        steps = max(1, round(1.0 / options.step))
-        if abs(steps * options.step - 1.0) > 1e-9:
-            steps = int(1.0 / options.step) + 1  # last step shorter, ending exactly at 1
         accepted = 0.0
-        for k in range(1, steps + 1):
-            eps = min(1.0, round(k * options.step, 12))
+        for eps in fixed_schedule(options.step):
             if not attempt(eps):
                 return accepted
             accepted = eps

@@ -9,6 +9,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from ocp.homotopy import fixed_schedule
 from ocp.problem import Problem
 from ocp.solution import HomotopyStep, Solution
 from ocp.solve import solve
@@ -30,7 +31,7 @@ class SolveReporter:
         if self.quiet:
             return solve(self.problem, method)
         h = self.problem.solver.homotopy
-        total = 1 if h.mode == "none" else (round(1 / h.step) if h.mode == "fixed" else None)
+        total = 1 if h.mode == "none" else (len(fixed_schedule(h.step)) if h.mode == "fixed" else None)
         if total is not None and method == "both":
             total *= 2  # the direct, then the indirect continuation
         with Progress(
