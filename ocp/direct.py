@@ -22,7 +22,7 @@ from ocp.simulate import Trajectory, coast
 from ocp.solution import HomotopyStep, Solution
 from ocp.transcription import DirectCollocation, NLPResult
 
-__all__ = ["solve_direct", "transcription_for", "coasting_baseline"]
+__all__ = ["solve_direct", "transcription_for"]
 
 
 @lru_cache(maxsize=16)
@@ -59,21 +59,19 @@ def _state_grid(tr: DirectCollocation, t0: float, tf: float) -> tuple[np.ndarray
     return t_all[order][keep], order[keep]
 
 
-def coasting_baseline(problem: Problem, t_eval: np.ndarray, tr: DirectCollocation | None = None) -> Trajectory:
-    """The ε → 0 solution: sensors coast (u ≡ 0), Σ from the Riccati IVP — the classical Kalman filter."""
-    tr = tr or transcription_for(problem)
-    P = tr.layout.pack(tr.layout.values(problem))
-    return coast(tr.model, P, t_eval)
+def _initial_guess(
+    tr: DirectCollocation, trajectory: Trajectory, P: np.ndarray, u: np.ndarray | None = None
+) -> np.ndarray:
+    """Decision vector of a trajectory sampled on the state grid (every start and node) and controls ``u``.
 
-
-def _initial_guess(tr: DirectCollocation, coasting: Trajectory, P: np.ndarray) -> np.ndarray:
-    """Decision vector of the coasting trajectory (states at every start and node, u = 0)."""
+    ``u`` has shape (K, d, nu) (controls at the collocation nodes); ``None`` means coasting (u = 0).
+    """
     K, d = tr.intervals, tr.colloc.degree
-    starts, nodes = tr.times(coasting.t[0], coasting.t[-1])
+    starts, nodes = tr.times(trajectory.t[0], trajectory.t[-1])
     t_all = np.concatenate([starts, nodes.ravel()])
-    tol = 1e-9 * max(1.0, abs(coasting.t[-1] - coasting.t[0]))
-    x_all = coasting.x[np.clip(np.searchsorted(coasting.t, t_all - tol), 0, len(coasting.t) - 1)]
-    u = np.zeros((K, d, tr.structure.nu))
+    tol = 1e-9 * max(1.0, abs(trajectory.t[-1] - trajectory.t[0]))
+    x_all = trajectory.x[np.clip(np.searchsorted(trajectory.t, t_all - tol), 0, len(trajectory.t) - 1)]
+    u = np.zeros((K, d, tr.structure.nu)) if u is None else u
     return tr.pack(x_all[: K + 1], x_all[K + 1 :].reshape(K, d, -1), u, P)
 
 

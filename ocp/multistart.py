@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from ocp.direct import _state_grid, transcription_for
+from ocp.direct import _initial_guess, _state_grid, transcription_for
 from ocp.problem import Problem
 from ocp.simulate import integrate
 from ocp.solution import Solution
@@ -37,15 +37,12 @@ def random_guess(problem: Problem, seed: int, amplitude: float = 3.0, modes: int
         tau = (t - t0) / (tf - t0)
         return (a * np.sin(m * np.pi * tau + phase)).sum(axis=0)
 
-    starts, nodes = tr.times(t0, tf)
+    _, nodes = tr.times(t0, tf)
     t_grid, _ = _state_grid(tr, t0, tf)
     trajectory = integrate(tr.model, P, t_grid, control=control, rtol=1e-8)
-    t_all = np.concatenate([starts, nodes.ravel()])
-    x_all = trajectory.x[np.clip(np.searchsorted(t_grid, t_all - 1e-9 * (tf - t0)), 0, len(t_grid) - 1)]
-    K, d = tr.intervals, tr.colloc.degree
-    u = np.array([control(t) for t in nodes.ravel()]).reshape(K, d, nu)
-    # the NLP's cost_scale is set from the coasting cost inside solve_direct; pack with the same scales
-    return tr.pack(x_all[: K + 1], x_all[K + 1 :].reshape(K, d, -1), u, P)
+    u = np.array([control(t) for t in nodes.ravel()]).reshape(tr.intervals, tr.colloc.degree, nu)
+    # the scaling of w does not depend on cost_scale (set inside solve_direct), so this P packs it correctly
+    return _initial_guess(tr, trajectory, P, u)
 
 
 def distinct_optima(solutions: list[Solution], rtol: float = 1e-6) -> list[dict[str, Any]]:
