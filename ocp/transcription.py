@@ -133,6 +133,7 @@ class DirectCollocation:
         self.ng = g.size1()
         self._terminal_labels = terminal_labels
         self._solvers: dict[bool, Any] = {}
+        self._bounds = self._make_bounds()
         self.build_time_s = time.perf_counter() - t_build
 
     # ------------------------------------------------------------------ layout
@@ -192,7 +193,10 @@ class DirectCollocation:
         return self._solvers[warm]
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(lbw, ubw, lbg, ubg): diagonal covariance entries ≥ 0, equalities, control bounds ≤ 0."""
+        """(lbw, ubw, lbg, ubg): diagonal covariance entries ≥ 0, equalities, control bounds ≤ 0 (read-only)."""
+        return self._bounds
+
+    def _make_bounds(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         lbw = np.full(self.nw, -np.inf)
         ubw = np.full(self.nw, np.inf)
         nx, d = self.structure.nx, self.colloc.degree
@@ -203,6 +207,8 @@ class DirectCollocation:
         ubg = np.zeros(self.ng)
         if self._n_bound:
             lbg[-self._n_bound :] = -np.inf
+        for array in (lbw, ubw, lbg, ubg):
+            array.setflags(write=False)
         return lbw, ubw, lbg, ubg
 
     def solve(
