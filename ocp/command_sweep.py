@@ -32,8 +32,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scheduler", default=None, help="address of a running dask scheduler (tcp://…)")
     parser.add_argument("--workers", type=int, default=None, help="local worker processes (default: one per core)")
     parser.add_argument("--no-warm-start", action="store_true", help="solve every task from the coasting guess")
-    parser.add_argument("--time-limit", type=float, default=None, metavar="S",
-                        help="wall-clock limit of each Ipopt solve of a task (sets solver.time_limit)")
+    parser.add_argument(
+        "--time-limit",
+        type=float,
+        default=None,
+        metavar="S",
+        help="wall-clock limit of each Ipopt solve of a task (sets solver.time_limit)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress display")
 
 
@@ -57,8 +62,6 @@ def run(args: argparse.Namespace) -> int:
     """Validate the whole sweep, then run the tasks not finished before; write rows as they complete."""
     from ocp.engine import open_client, run_tasks
     from ocp.files import write_json, write_netcdf
-    from ocp.model import Structure
-    from ocp.problem import Problem
     from ocp.sweep import expand_sweep, load_sweep
     from ocp.sweep_report import SweepProgress, sweep_summary
 
@@ -84,10 +87,6 @@ def run(args: argparse.Namespace) -> int:
         _write_rows(results_path, list(rows.values()))
         progress.advance(row)
 
-    structure_keys = []
-    for t in todo:
-        problem = Problem.from_dict(t.problem)
-        structure_keys.append((Structure.of(problem), problem.solver.collocation.model_dump_json()))
     with progress:
         if todo:
             with open_client(args.scheduler, args.workers) as client:
@@ -95,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
                     client,
                     [{"problem": t.problem} for t in todo],
                     on_result,
-                    structure_keys,
+                    [t.structure for t in todo],
                     [t.coordinates() for t in todo],
                     warm_start=not args.no_warm_start,
                 )

@@ -24,6 +24,7 @@ from pydantic import Field, field_validator
 
 from ocp.config import ConfigError, StrictModel, load_config
 from ocp.keypath import get_path, parse_key_path, set_path
+from ocp.model import Structure
 from ocp.problem import Problem, load_problem
 
 __all__ = ["SweepSpec", "SweepTask", "load_sweep", "expand_sweep"]
@@ -51,12 +52,17 @@ class SweepSpec(StrictModel):
 
 @dataclass(frozen=True)
 class SweepTask:
-    """One point of the sweep: its id (problem hash), position, varied values and full problem data."""
+    """One point of the sweep: its id (problem hash), position, varied values and full problem data.
+
+    ``structure`` identifies the NLP layout (problem structure and collocation grid): tasks warm-start
+    each other only within one structure.
+    """
 
     task: str
     index: int
     values: dict[str, Any]
     problem: dict[str, Any]
+    structure: tuple[Any, str]
 
     def coordinates(self) -> np.ndarray:
         """The varied values flattened to numbers (for nearest-neighbour warm starts)."""
@@ -105,5 +111,7 @@ def expand_sweep(spec: SweepSpec, base: Problem, source: str = "<sweep>") -> lis
             raise ConfigError(
                 f"{source}: vary (task {index}: {dict(zip(keys, combo, strict=True))}): {detail}"
             ) from None
-        tasks.append(SweepTask(problem.digest(), index, dict(zip(keys, combo, strict=True)), problem.normalised()))
+        structure = (Structure.of(problem), problem.solver.collocation.model_dump_json())
+        values = dict(zip(keys, combo, strict=True))
+        tasks.append(SweepTask(problem.digest(), index, values, problem.normalised(), structure))
     return tasks
