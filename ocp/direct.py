@@ -22,7 +22,7 @@ from ocp.simulate import Trajectory, coast
 from ocp.solution import HomotopyStep, Solution
 from ocp.transcription import DirectCollocation, NLPResult
 
-__all__ = ["solve_direct", "transcription_for"]
+__all__ = ["solve_direct", "transcription_for", "coasting_baseline"]
 
 
 @lru_cache(maxsize=16)
@@ -57,6 +57,13 @@ def _state_grid(tr: DirectCollocation, t0: float, tf: float) -> tuple[np.ndarray
     order = np.argsort(t_all, kind="stable")
     keep = np.concatenate([[True], np.diff(t_all[order]) > 1e-12 * max(1.0, abs(tf - t0))])
     return t_all[order][keep], order[keep]
+
+
+def coasting_baseline(problem: Problem, t_eval: np.ndarray, tr: DirectCollocation | None = None) -> Trajectory:
+    """The ε → 0 solution: sensors coast (u ≡ 0), Σ from the Riccati IVP — the classical Kalman filter."""
+    tr = tr or transcription_for(problem)
+    P = tr.layout.pack(tr.layout.values(problem))
+    return coast(tr.model, P, t_eval)
 
 
 def _initial_guess(
