@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test test-fast lint bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -17,16 +17,21 @@ $(STAMP): pyproject.toml | $(BIN)/python
 
 demo: $(STAMP)  ## solve the default problem (problems/hussein2008.yaml) into out/hussein2008/
 	$(BIN)/mobisense solve problems/hussein2008.yaml --out out/hussein2008
+	@echo "the command is installed in $(BIN)/: run '$(BIN)/mobisense --help' (or 'source $(BIN)/activate')"
 
-test: $(STAMP)  ## ruff + the whole test suite (tests and notebooks)
+test: $(STAMP)  ## ruff + the whole test suite (tests and notebooks): what CI runs
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest
+
+test-fast: $(STAMP)  ## the edit-test loop: everything but notebooks and tests marked slow
+	$(BIN)/ruff check .
+	$(BIN)/python -m pytest -m "not slow and not notebook" -q
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
 
-bench: $(STAMP)  ## performance ratios, measured in one run (not part of the tests)
-	@for b in benchmarks/bench_*.py; do echo "== $$b"; PYTHONPATH=. $(BIN)/python $$b || exit 1; done
+bench: $(STAMP)  ## performance targets with PASS/MISS, ratios measured in one run (not part of the tests)
+	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
 
 clean:
-	rm -rf out .pytest_cache
+	rm -rf out .pytest_cache build *.egg-info

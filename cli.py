@@ -1,67 +1,60 @@
-"""The ``mobisense`` command line: ``mobisense solve|validate|steady-state|replay|sweep|simulate …``.
+"""The ``mobisense`` command line: ``mobisense solve|validate|sweep|steady-state|replay|simulate …``.
 
-Each sub-command lives in its own module (imported only when used, so ``--help`` is fast) exposing
-``add_arguments(parser)`` and ``run(args) -> int``; its module docstring's first line is its help text.
-Exit status: 0 success, 1 solver failure (results already solved are kept), 2 invalid input
-(one message naming the file and the key path, no traceback), 130 interrupted.
+:data:`COMMANDS` is the one registry of sub-commands. Each names a class in its package's ``commands``
+module whose docstring's first line is its help text, with ``add_arguments(parser)`` and
+``run(args) -> int``; those modules import their heavy dependencies only inside ``run``, so ``--help``
+is fast. Exit status: 0 success, 1 solver or simulation failure (results already computed are kept),
+2 invalid input (one message naming the file and the key path, no traceback), 130 interrupted.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
-import importlib.util
 import sys
 from collections.abc import Sequence
+from typing import Any
 
-#: sub-command name -> module implementing it
+from mobisense import __version__
+
+__all__ = ["COMMANDS", "build_parser", "main"]
+
+#: sub-command name -> "module:class" implementing it
 COMMANDS: dict[str, str] = {
-    "solve": "ocp.command_solve",
-    "validate": "ocp.command_validate",
-    "steady-state": "estimation.command_steady_state",
-    "replay": "formation.command_replay",
-    "sweep": "ocp.command_sweep",
-    "simulate": "formation.command_simulate",
+    "solve": "mobisense.ocp.commands:SolveCommand",
+    "validate": "mobisense.ocp.commands:ValidateCommand",
+    "sweep": "mobisense.ocp.commands:SweepCommand",
+    "steady-state": "mobisense.estimation.commands:SteadyStateCommand",
+    "replay": "mobisense.formation.commands:ReplayCommand",
+    "simulate": "mobisense.formation.commands:SimulateCommand",
 }
 
 
-def _help_line(module_name: str) -> str:
-    spec = importlib.util.find_spec(module_name)
-    if spec is None or spec.origin is None:
-        return "(not installed)"
-    with open(spec.origin, encoding="utf-8") as handle:
-        for line in handle:
-            line = line.strip().strip('"').strip()
-            if line:
-                return line
-    return ""
+def _command(name: str) -> Any:
+    module_name, _, class_name = COMMANDS[name].partition(":")
+    return getattr(importlib.import_module(module_name), class_name)
 
 
-def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
-    """Build the argument parser; only the sub-command named in ``argv`` is imported."""
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every sub-command."""
     parser = argparse.ArgumentParser(prog="mobisense", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"mobisense {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    wanted = next((a for a in (argv or []) if not a.startswith("-")), None)
-    for name, module_name in COMMANDS.items():
-        if importlib.util.find_spec(module_name) is None:
-            continue  # a command whose module is not there yet
-        help_line = _help_line(module_name)
+    for name in COMMANDS:
+        command = _command(name)
+        help_line = (command.__doc__ or "").strip().splitlines()[0]
         command_parser = sub.add_parser(name, help=help_line, description=help_line)
-        if name == wanted:
-            module = importlib.import_module(module_name)
-            module.add_arguments(command_parser)
-            command_parser.set_defaults(run=module.run)
-        else:
-            command_parser.set_defaults(module_name=module_name)
+        command.add_arguments(command_parser)
+        command_parser.set_defaults(run=command.run)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (also used by ``python -m``/console script)."""
-    from ocp.config import ConfigError
+    from mobisense.core.config import ConfigError
 
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser(argv)
+    parser = build_parser()
     args = parser.parse_args(argv)
     try:
         return int(args.run(args) or 0)

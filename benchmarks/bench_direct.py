@@ -21,11 +21,9 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-import ocp  # noqa: F401  (sets OPENBLAS_NUM_THREADS before CasADi loads)
-from ocp.direct import solve_direct
-from ocp.model import Structure
-from ocp.problem import Problem, load_problem
-from ocp.transcription import DirectCollocation
+from mobisense import Problem, load_problem
+from mobisense.ocp import Structure
+from mobisense.ocp.direct import DirectCollocation, solve_direct
 
 console = Console(width=150)
 

@@ -22,11 +22,9 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from estimation.distributed_filter import DistributedFilter, PdeModel
-from estimation.distributed_mesh import SensorMesh, grid_network
-from estimation.distributed_simulation import DistributedScenario, simulate
-from formation.gradient_formation import GradientFormation
-from ocp.config import load_config
+from mobisense.core import load_config
+from mobisense.estimation.distributed import DistributedFilter, PdeModel, SensorMesh, grid_network
+from mobisense.formation.distributed import DistributedScenario, GradientFormation, simulate
 
 SCENARIO = Path(__file__).resolve().parent.parent / "problems" / "distributed_advection_diffusion.yaml"
 console = Console()

@@ -17,9 +17,7 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 from timing import best_time
 
-from estimation.cooperative_filter import _model_sequence, run_cooperative_filter
-from estimation.information_model import cross_formation
-from estimation.noise_config import CooperativeNoise
+from mobisense.estimation.cooperative import CooperativeNoise, cross_formation, model_sequence, run_cooperative_filter
 
 
 def problem(K: int, rng: np.random.Generator):  # noqa: ANN201
@@ -33,7 +31,7 @@ def problem(K: int, rng: np.random.Generator):  # noqa: ANN201
 
 def filterpy_run(positions, H, noise, measurements, x0, P0) -> np.ndarray:  # noqa: ANN001
     """filterpy KalmanFilter on the same model; the model matrices are built the same (vectorised) way."""
-    model = _model_sequence(positions, H, noise)
+    model = model_sequence(positions, H, noise)
     y = measurements - model["DH"]
     kf = KalmanFilter(dim_x=3, dim_z=4, dim_u=3)
     kf.x, kf.P, kf.B = x0.reshape(3, 1).copy(), P0.copy(), np.eye(3)

@@ -26,13 +26,10 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-import ocp  # noqa: F401  (sets OPENBLAS_NUM_THREADS before CasADi loads)
-from ocp.bvp_collocation import collocation_mesh
-from ocp.bvp_system import hamiltonian_system
-from ocp.direct import solve_direct, transcription_for
-from ocp.indirect import refine_from_direct, solve_indirect
-from ocp.model import Structure
-from ocp.problem import Problem, load_problem
+from mobisense import Problem, load_problem
+from mobisense.ocp import Structure
+from mobisense.ocp.direct import solve_direct, transcription_for
+from mobisense.ocp.indirect import collocation_mesh, hamiltonian_system, refine_from_direct, solve_indirect
 
 console = Console(width=150)
 

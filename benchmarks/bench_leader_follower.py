@@ -2,7 +2,7 @@
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_leader_follower.py
 
-1. switching Kalman filter (batched ``estimation.kalman`` kernels) vs the same algorithm written with
+1. switching Kalman filter (batched ``mobisense.estimation.kalman`` kernels) vs the same algorithm written with
    filterpy's ``KalmanFilter`` (one object per sensor pair, same restart and closest-merge rules), on one
    recorded sweep of a target across the sensor pairs of a Khepera-like ring; the estimates are checked to
    agree before anything is timed. The shared kernels are batched over the active pairs, which carries a
@@ -22,11 +22,16 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 from timing import best_time
 
-from estimation.range_ring import KHEPERA_MOUNT_ANGLES_DEG, KHEPERA_PAIRS, RangeSensorRing
-from estimation.switching_kalman import C_POSITION, SwitchingKalmanFilter, random_walk_model
-from formation.leader_follower_runs import simulate_scenario
-from formation.leader_follower_scenario import LeaderFollowerScenario
-from ocp.config import load_config
+from mobisense.core import load_config
+from mobisense.estimation.tracking import (
+    C_POSITION,
+    KHEPERA_MOUNT_ANGLES_DEG,
+    KHEPERA_PAIRS,
+    RangeSensorRing,
+    SwitchingKalmanFilter,
+    random_walk_model,
+)
+from mobisense.formation.leader_follower import LeaderFollowerScenario, simulate_scenario
 
 PROBLEMS = Path(__file__).resolve().parent.parent / "problems"
 H, Q_STD = 0.01, 1.0

@@ -22,11 +22,9 @@ from pathlib import Path
 
 import yaml
 
-import estimation.formation_design as formation_design
-from formation.replay_estimation import ClosedLoopEstimator
-from formation.replay_scenario import FieldReplayScenario
-from formation.replay_simulation import build_system, simulate
-from ocp.config import parse_config
+import mobisense.estimation.cooperative.formation_design as formation_design  # patched to time its calls
+from mobisense.core import parse_config
+from mobisense.formation.replay import ClosedLoopEstimator, FieldReplayScenario, build_system, simulate
 
 SCENARIO = Path(__file__).resolve().parent.parent / "problems" / "replay_isotherm13.yaml"
 

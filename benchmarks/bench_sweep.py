@@ -16,12 +16,11 @@ import time
 import numpy as np
 from rich.console import Console
 from rich.table import Table
-
-import ocp  # noqa: F401
-from ocp.direct import _cached_transcription, solve_direct
-from ocp.engine import _nearest, open_client, run_tasks, solve_payload
-from ocp.problem import Problem
 from tests.problems import hussein2008
+
+from mobisense import Problem
+from mobisense.ocp.batch import nearest_seed, open_client, run_tasks, solve_task
+from mobisense.ocp.direct import clear_transcription_cache, solve_direct
 
 console = Console()
 
@@ -44,9 +43,9 @@ def serial(items: list[dict], warm_start: bool) -> tuple[float, list[dict]]:
     seeds, rows = [], []
     t0 = time.perf_counter()
     for item in items:
-        seed = _nearest(seeds, None, item["coords"]) if warm_start else None
+        seed = nearest_seed(seeds, None, item["coords"]) if warm_start else None
         payload = {"problem": item["problem"], "seed": seed}
-        result = solve_payload(payload)
+        result = solve_task(payload)
         if result["nlp"] is not None:
             seeds.append((None, item["coords"], result["nlp"]))
         rows.append(result["row"])
@@ -58,7 +57,7 @@ def parallel(items: list[dict], workers: int, warm_start: bool) -> tuple[float, 
     rows: list[dict] = []
     t0 = time.perf_counter()
     with open_client(None, workers) as client:
-        client.run(lambda: __import__("ocp.direct"))  # workers import CasADi before the clock starts
+        client.run(lambda: __import__("mobisense.ocp.direct.solver"))  # workers import CasADi before the clock starts
         startup = time.perf_counter() - t0
         t1 = time.perf_counter()
         run_tasks(
@@ -75,7 +74,7 @@ def parallel(items: list[dict], workers: int, warm_start: bool) -> tuple[float, 
 def main() -> None:
     """Run and print the measurements."""
     items = tasks()
-    _cached_transcription.cache_clear()
+    clear_transcription_cache()
     problem = Problem.from_dict(items[0]["problem"])
     t0 = time.perf_counter()
     solve_direct(problem)
@@ -83,13 +82,13 @@ def main() -> None:
     t0 = time.perf_counter()
     solve_direct(problem)
     cached = time.perf_counter() - t0
-    _cached_transcription.cache_clear()
+    clear_transcription_cache()
 
     table = Table(title="40-task sweep (default problem, K = 60), measured in this run")
     table.add_column("quantity")
     table.add_column("value", justify="right")
     for warm in (True, False):
-        _cached_transcription.cache_clear()
+        clear_transcription_cache()
         serial_time, serial_rows = serial(items, warm)
         startup, wall, rows = parallel(items, 2, warm)
         busy = sum(r["time_s"] for r in rows)

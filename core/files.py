@@ -11,6 +11,7 @@ import os
 import tempfile
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from enum import Enum
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +45,9 @@ def _umask() -> int:
 
 
 def to_jsonable(value: Any) -> Any:
-    """Convert numpy scalars/arrays (recursively) to plain Python for ``json``; NaN/inf become None."""
+    """Convert numpy scalars/arrays and enums (recursively) to plain Python for ``json``; NaN/inf become None."""
+    if isinstance(value, Enum):
+        return to_jsonable(value.value)
     if isinstance(value, dict):
         return {str(k): to_jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):

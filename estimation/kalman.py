@@ -3,7 +3,7 @@
 The kernels are written once with ``@``, ``+`` and the two helpers :func:`transpose` and :func:`solve`,
 so they evaluate either on numpy arrays with leading batch dimensions (state ``(..., n, 1)``,
 covariance ``(..., n, n)``; broadcasting lets a covariance shared by all Monte Carlo runs stay
-unbatched) or on CasADi ``SX`` matrices, from which :mod:`estimation.cooperative_filter` compiles a
+unbatched) or on CasADi ``SX`` matrices, from which :mod:`mobisense.estimation.cooperative.filter` compiles a
 whole-trajectory rollout. Vectors are columns inside the kernels.
 """
 

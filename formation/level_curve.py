@@ -1,7 +1,7 @@
 """Level-curve tracking of the formation centre (SPEC §2.7, seed §VI, eqs. 44-48).
 
 The centre is a Newtonian particle ``r_c'' = a_c`` (unit mass; the formation's total force is
-``f_c = N a_c``, :mod:`formation.jacobi`). In Frenet–Serret form, with speed ``α = ‖r_c'‖``, unit velocity
+``f_c = N a_c``, :mod:`mobisense.formation.jacobi`). In Frenet–Serret form, with speed ``α = ‖r_c'‖``, unit velocity
 ``x2 = r_c'/α`` and its left normal ``y2``: ``α' = v_c = a_c·x2`` and ``x2' = α u_c y2`` with the path
 curvature ``u_c = a_c·y2/α²`` (eqs. 44-47), so ``a_c = v_c x2 + α² u_c y2``.
 
@@ -33,14 +33,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation.hessian_estimation import _frenet
-from formation.shape_control import perp
+from mobisense.core.registry import Registry
+from mobisense.estimation.fields.base import level_curve_frame
+from mobisense.formation.shape_control import perp
 
 __all__ = [
     "LevelFunction",
     "LinearLevel",
     "ReciprocalLevel",
     "LEVEL_FUNCTIONS",
+    "LevelFunctionName",
     "register_level_function",
     "heading_error",
     "curvature_terms",
@@ -70,13 +72,14 @@ class LevelFunction(ABC):
 
 
 #: kind -> LevelFunction subclass
-LEVEL_FUNCTIONS: dict[str, type[LevelFunction]] = {}
+LEVEL_FUNCTIONS: Registry[type[LevelFunction]] = Registry("level function")
+#: the schema type of a field naming a level function
+LevelFunctionName = LEVEL_FUNCTIONS.choice()
 
 
 def register_level_function(cls: type[LevelFunction]) -> type[LevelFunction]:
     """Class decorator adding a :class:`LevelFunction` to :data:`LEVEL_FUNCTIONS`."""
-    LEVEL_FUNCTIONS[cls.kind] = cls
-    return cls
+    return LEVEL_FUNCTIONS.register(cls.kind, cls)
 
 
 @register_level_function
@@ -122,14 +125,14 @@ def heading_error(velocity: np.ndarray, gradient: np.ndarray) -> tuple[np.ndarra
     """Speed ``α`` and heading error ``θ ∈ (−π, π]`` (SPEC §2.7) for velocities and gradients ``(..., 2)``."""
     alpha = np.linalg.norm(velocity, axis=-1)
     x2 = np.asarray(velocity, dtype=float) / alpha[..., None]
-    x1, y1, _ = _frenet(np.asarray(gradient, dtype=float))
+    x1, y1, _ = level_curve_frame(np.asarray(gradient, dtype=float))
     theta = np.arctan2(-np.sum(y1 * x2, axis=-1), np.sum(x1 * x2, axis=-1))  # cos θ = x1·x2, sin θ = −y1·x2
     return alpha, theta
 
 
 def curvature_terms(gradient: np.ndarray, hessian: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``κ1 = −x1'∇²z x1/‖∇z‖`` and ``κ2 = x1'∇²z y1/‖∇z‖`` (SPEC §2.7; sign of κ2 in the module notes)."""
-    x1, y1, norm = _frenet(np.asarray(gradient, dtype=float))
+    x1, y1, norm = level_curve_frame(np.asarray(gradient, dtype=float))
     Hx1 = (np.asarray(hessian, dtype=float) @ x1[..., None])[..., 0]
     return -np.sum(x1 * Hx1, axis=-1) / norm, np.sum(y1 * Hx1, axis=-1) / norm
 

@@ -1,6 +1,6 @@
 """Formation shape and orientation controllers on the Jacobi vectors (SPEC §2.6, seed §V, eqs. 41-43).
 
-After the Jacobi transform (:mod:`formation.jacobi`) the shape dynamics are N − 1 decoupled double
+After the Jacobi transform (:mod:`mobisense.formation.jacobi`) the shape dynamics are N − 1 decoupled double
 integrators ``q_j'' = u_j``, independent of the centre. Two controllers:
 
 * :class:`FixedShapeController` — ``u_j = q_j^d'' − K2 (q_j − q_j^d) − K3 (q_j' − q_j^d')``: the seed's
@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation.information_model import rotation
+from mobisense.estimation.cooperative.information_model import rotation
 
 __all__ = [
     "perp",

@@ -18,14 +18,9 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-__all__ = ["CollocationScheme", "SCHEMES"]
+from mobisense.ocp.registries import SCHEMES
 
-#: scheme name -> (CasADi point set, superconvergence order of the cost as a function of degree d)
-SCHEMES: dict[str, tuple[str, str]] = {
-    "radau": ("radau", "2d-1"),
-    "legendre": ("legendre", "2d"),
-}
-
+__all__ = ["CollocationScheme"]
 
 @dataclass(frozen=True)
 class CollocationScheme:
@@ -39,10 +34,9 @@ class CollocationScheme:
     W: np.ndarray = field(init=False)  # (d,) quadrature weights on the collocation nodes
 
     def __post_init__(self) -> None:
-        if self.scheme not in SCHEMES:
-            raise ValueError(f"unknown collocation scheme {self.scheme!r}; expected one of {sorted(SCHEMES)}")
+        SCHEMES.check(self.scheme)
         d = self.degree
-        tau = np.append(0.0, ca.collocation_points(d, SCHEMES[self.scheme][0]))
+        tau = np.append(0.0, ca.collocation_points(d, SCHEMES[self.scheme]))
         D = np.zeros((d + 1, d))
         E = np.zeros(d + 1)
         for j in range(d + 1):

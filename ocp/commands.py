@@ -1,4 +1,9 @@
-"""Solve a mobile-sensor problem file and write summary.json, solution.nc and figures."""
+"""The optimal-control commands: ``mobisense solve``, ``mobisense validate`` and ``mobisense sweep``.
+
+Each command is a class with a one-line docstring (its help text), ``add_arguments(parser)`` and
+``run(args) -> int``; :mod:`mobisense.cli` registers them. Heavy modules are imported inside ``run``,
+so that ``mobisense --help`` stays fast.
+"""
 
 from __future__ import annotations
 
@@ -7,35 +12,72 @@ import sys
 from pathlib import Path
 from typing import Any
 
-__all__ = ["add_arguments", "run", "apply_overrides"]
+__all__ = ["SolveCommand", "ValidateCommand", "SweepCommand", "apply_overrides"]
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add the ``solve`` arguments."""
-    parser.add_argument("problem", type=Path, help="problem YAML file (see problems/hussein2008.yaml)")
-    parser.add_argument("--out", type=Path, default=None, help="output folder (default: out/<problem name>)")
-    parser.add_argument("--method", choices=["direct", "indirect", "both"], default=None, help="override solver.method")
-    parser.add_argument("--intervals", type=int, default=None, help="override solver.collocation.intervals")
-    parser.add_argument("--degree", type=int, default=None, help="override solver.collocation.degree")
-    parser.add_argument(
-        "--scheme", choices=["radau", "legendre"], default=None, help="override solver.collocation.scheme"
-    )
-    parser.add_argument(
-        "--homotopy", choices=["fixed", "adaptive", "none"], default=None, help="override solver.homotopy.mode"
-    )
-    parser.add_argument("--step", type=float, default=None, help="override solver.homotopy.step (δ)")
-    parser.add_argument("--no-plot", action="store_true", help="skip the figures")
-    parser.add_argument("--quiet", action="store_true", help="no progress display or table")
-    parser.add_argument(
-        "--multistart",
-        type=int,
-        default=None,
-        metavar="K",
-        help="solve from K initial guesses (start 0: the homotopy; others: random feasible "
-        "trajectories solved at ε = 1) on dask workers and keep the best",
-    )
-    parser.add_argument("--workers", type=int, default=None, help="local worker processes for --multistart")
-    parser.add_argument("--scheduler", default=None, help="dask scheduler address for --multistart")
+class SolveCommand:
+    """Solve a mobile-sensor problem file and write summary.json, solution.nc and figures."""
+
+    @staticmethod
+    def add_arguments(parser: argparse.ArgumentParser) -> None:
+        """Add the ``solve`` arguments."""
+        from mobisense.ocp.registries import HOMOTOPY_MODES, METHODS, SCHEMES
+
+        parser.add_argument("problem", type=Path, help="problem YAML file (see problems/hussein2008.yaml)")
+        parser.add_argument("--out", type=Path, default=None, help="output folder (default: out/<file name>)")
+        parser.add_argument("--method", choices=METHODS.names(), default=None, help="override solver.method")
+        parser.add_argument("--intervals", type=int, default=None, help="override solver.collocation.intervals")
+        parser.add_argument("--degree", type=int, default=None, help="override solver.collocation.degree")
+        parser.add_argument(
+            "--scheme", choices=SCHEMES.names(), default=None, help="override solver.collocation.scheme"
+        )
+        parser.add_argument(
+            "--homotopy", choices=HOMOTOPY_MODES.names(), default=None, help="override solver.homotopy.mode"
+        )
+        parser.add_argument("--step", type=float, default=None, help="override solver.homotopy.step (δ)")
+        parser.add_argument("--no-plot", action="store_true", help="skip the figures")
+        parser.add_argument("--quiet", action="store_true", help="no progress display or table")
+        parser.add_argument(
+            "--multistart",
+            type=int,
+            default=None,
+            metavar="K",
+            help="solve from K initial guesses (start 0: the homotopy; others: random feasible "
+            "trajectories solved at ε = 1) on dask workers and keep the best",
+        )
+        parser.add_argument("--workers", type=int, default=None, help="local worker processes for --multistart")
+        parser.add_argument("--scheduler", default=None, help="dask scheduler address for --multistart")
+
+    @staticmethod
+    def run(args: argparse.Namespace) -> int:
+        """Validate, solve, write outputs; exit 0 (solved), 1 (solver failure, partial results kept), 2 (bad input)."""
+        from mobisense.core.config import ConfigError, read_yaml
+        from mobisense.core.output import default_output_folder
+        from mobisense.ocp.problem import Problem
+        from mobisense.ocp.reporting import SolveReporter
+
+        data = apply_overrides(read_yaml(args.problem), args)
+        problem = Problem.from_dict(data, source=str(args.problem))  # ConfigError -> exit 2, nothing written
+        out = args.out if args.out is not None else default_output_folder(args.problem)
+        reporter = SolveReporter(problem, quiet=args.quiet)
+        if args.multistart is not None:
+            if args.multistart < 1 or problem.solver.method != "direct":
+                raise ConfigError(f"{args.problem}: --multistart: expected K >= 1 with solver.method 'direct'")
+            from mobisense.ocp.batch.multistart import solve_multistart
+
+            solution = solve_multistart(problem, args.multistart, args.scheduler, args.workers)
+        else:
+            solution = reporter.run(problem.solver.method)
+        solution.save(out)
+        if not args.no_plot:
+            from mobisense.ocp.plots import save_figures
+
+            save_figures(solution, out)
+        reporter.report(solution, out)
+        if not solution.success:
+            print(f"mobisense: solver failure: {solution.message}", file=sys.stderr)
+            return 1
+        return 0
 
 
 def apply_overrides(data: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
@@ -58,31 +100,66 @@ def apply_overrides(data: dict[str, Any], args: argparse.Namespace) -> dict[str,
     return data
 
 
-def run(args: argparse.Namespace) -> int:
-    """Validate, solve, write outputs; exit 0 (solved), 1 (solver failure, partial results kept), 2 (bad input)."""
-    from ocp.config import ConfigError, read_yaml
-    from ocp.problem import Problem
-    from ocp.reporting import SolveReporter
+class ValidateCommand:
+    """Validate problem files without solving: one line per file, exit 2 at the first invalid one."""
 
-    data = apply_overrides(read_yaml(args.problem), args)
-    problem = Problem.from_dict(data, source=str(args.problem))  # ConfigError -> exit 2, nothing written
-    out = args.out if args.out is not None else Path("out") / problem.name
-    reporter = SolveReporter(problem, quiet=args.quiet)
-    if args.multistart is not None:
-        if args.multistart < 1 or problem.solver.method != "direct":
-            raise ConfigError(f"{args.problem}: --multistart: expected K >= 1 with solver.method 'direct'")
-        from ocp.multistart import solve_multistart
+    @staticmethod
+    def add_arguments(parser: argparse.ArgumentParser) -> None:
+        """Add the ``validate`` arguments."""
+        parser.add_argument("files", type=Path, nargs="+", help="problem YAML files")
 
-        solution = solve_multistart(problem, args.multistart, args.scheduler, args.workers)
-    else:
-        solution = reporter.run(problem.solver.method)
-    solution.save(out)
-    if not args.no_plot:
-        from ocp.plots import save_figures
+    @staticmethod
+    def run(args: argparse.Namespace) -> int:
+        """Validate each file; print a one-line description of each valid problem."""
+        from mobisense.ocp.problem import load_problem
 
-        save_figures(solution, out)
-    reporter.report(solution, out)
-    if not solution.success:
-        print(f"mobisense: solver failure: {solution.message}", file=sys.stderr)
-        return 1
-    return 0
+        for path in args.files:
+            problem = load_problem(path)  # ConfigError -> exit 2 with file and key path
+            c = problem.solver.collocation
+            print(
+                f"{path}: valid — problem {problem.name!r}: n = {problem.n} states, N = {problem.N} sensors, "
+                f"t ∈ [{problem.horizon.t0:g}, {problem.horizon.tf:g}], {problem.solver.method} "
+                f"({c.scheme} d = {c.degree}, {c.intervals} intervals), hash {problem.digest()}"
+            )
+        return 0
+
+
+class SweepCommand:
+    """Run a parameter sweep on dask (local processes or a cluster); resumable, results in results.parquet."""
+
+    @staticmethod
+    def add_arguments(parser: argparse.ArgumentParser) -> None:
+        """Add the ``sweep`` arguments."""
+        parser.add_argument("sweep", type=Path, help="sweep YAML file (base problem, mode, vary)")
+        parser.add_argument("--out", type=Path, default=None, help="output folder (default out/<file name>)")
+        parser.add_argument("--scheduler", default=None, help="address of a running dask scheduler (tcp://…)")
+        parser.add_argument(
+            "--workers", type=int, default=None, help="local worker processes (default: one per core)"
+        )
+        parser.add_argument("--no-warm-start", action="store_true", help="solve every task from the coasting guess")
+        parser.add_argument(
+            "--time-limit",
+            type=float,
+            default=None,
+            metavar="S",
+            help="wall-clock limit of each Ipopt solve of a task (sets solver.time_limit)",
+        )
+        parser.add_argument("--quiet", action="store_true", help="no progress display")
+
+    @staticmethod
+    def run(args: argparse.Namespace) -> int:
+        """Validate the whole sweep, then run the tasks not finished before; write rows as they complete."""
+        from mobisense.core.output import default_output_folder
+        from mobisense.ocp.batch.sweep_runner import run_sweep
+
+        out = args.out if args.out is not None else default_output_folder(args.sweep)
+        result = run_sweep(
+            args.sweep,
+            out,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            warm_start=not args.no_warm_start,
+            time_limit=args.time_limit,
+            quiet=args.quiet,
+        )
+        return 0 if result.summary["counts"]["error"] == 0 else 1

@@ -1,14 +1,15 @@
 """Solve a problem both ways — direct collocation and the indirect (PMP) method — and measure the agreement.
 
-``solve_both(problem)`` runs :func:`ocp.direct.solve_direct`, the indirect ε-continuation from the Kalman
-solution (:func:`ocp.indirect.indirect_continuation`), and the direct-seeded refinement (the BVP at ε = 1
-started from the direct states and multiplier costates, :func:`ocp.indirect.refine_from_direct`). It
-returns the direct solution as a :class:`ComparedSolution` whose ``stats`` carry
+``solve_both(problem)`` runs :func:`mobisense.ocp.direct.solver.solve_direct`, the indirect ε-continuation from the
+Kalman solution (:func:`mobisense.ocp.indirect.solver.indirect_continuation`), and the direct-seeded refinement (the
+BVP at ε = 1 started from the direct states and multiplier costates,
+:func:`mobisense.ocp.indirect.solver.refine_from_direct`). It returns the direct solution as a
+:class:`ComparedSolution` whose ``stats`` carry
 
 - ``indirect``: cost pieces, status, time, nodes and homotopy record of the continuation;
 - ``seeded``: the same for the direct-seeded refinement, with its own ``agreement``;
 - ``agreement``: direct vs indirect continuation (see :func:`agreement`);
-- ``optimality``: residuals of the necessary conditions of every solution (:mod:`ocp.bvp_residuals`);
+- ``optimality``: residuals of the necessary conditions of every solution (:mod:`mobisense.ocp.indirect.residuals`);
 
 and whose ``indirect`` attribute (saved as ``indirect_*`` variables of solution.nc) is the indirect solution.
 """
@@ -22,14 +23,14 @@ from typing import Any
 
 import numpy as np
 
-from ocp.bvp_residuals import optimality_residuals, solution_states_costates
-from ocp.bvp_solvers import BVPSolution
-from ocp.bvp_system import costate_matrix, hamiltonian_system
-from ocp.direct import solve_direct
-from ocp.indirect import indirect_continuation, refine_from_direct, solution_from_bvp
-from ocp.model import Structure
-from ocp.problem import Problem
-from ocp.solution import HomotopyStep, Solution
+from mobisense.ocp.direct.solver import solve_direct
+from mobisense.ocp.indirect.bvp_solvers import BVPSolution
+from mobisense.ocp.indirect.hamiltonian import hamiltonian_system
+from mobisense.ocp.indirect.residuals import optimality_residuals
+from mobisense.ocp.indirect.solver import indirect_continuation, refine_from_direct, solution_from_bvp
+from mobisense.ocp.model import Structure
+from mobisense.ocp.problem import Problem
+from mobisense.ocp.solution import HomotopyStep, Solution
 
 __all__ = ["ComparedSolution", "agreement", "solve_both"]
 
@@ -63,21 +64,23 @@ def agreement(direct: Solution, indirect: BVPSolution) -> dict[str, Any]:
     """
     problem = direct.problem
     system = hamiltonian_system(Structure.of(problem))
-    s = system.structure
-    nx, n, ns, N = s.nx, s.n, s.n_sigma, s.N
+    layout = system.structure.state
+    nx = layout.nx
     P = system.layout.pack({**system.layout.values(problem), "eps": indirect.eps})
-    x_dir, lam_dir = solution_states_costates(direct)
+    x_dir, lam_dir = direct.states(), direct.costates()
     x_ind = indirect.evaluate(direct.t)[:nx].T
     y_u = indirect.evaluate(direct.t_u)
     u_ind = np.asarray(system.control.map(direct.t_u.size)(y_u[:nx], y_u[nx:], P)).T
     lam_ind = indirect.evaluate(direct.t_costate)[nx:].T / indirect.eps
 
     def with_matrix_costate(lam: np.ndarray) -> np.ndarray:
-        Lam = costate_matrix(lam[:, :ns], n).reshape(len(lam), -1)
-        return np.column_stack([Lam, lam[:, ns:]])
+        """Columns [Λ (n·n), λ_p (2N), λ_v (2N)] so the Σ costate is compared as the matrix Λ."""
+        Lam, lam_p, lam_v = layout.split_costate(lam)
+        return np.column_stack([Lam.reshape(len(lam), -1), lam_p.reshape(len(lam), -1), lam_v.reshape(len(lam), -1)])
 
-    state_groups = {"Sigma": slice(0, ns), "p": slice(ns, ns + 2 * N), "v": slice(ns + 2 * N, nx)}
-    costate_groups = {"Lam": slice(0, n * n), "lam_p": slice(n * n, n * n + 2 * N), "lam_v": slice(n * n + 2 * N, None)}
+    n2, N2 = layout.n**2, layout.nu
+    state_groups = layout.groups
+    costate_groups = {"Lam": slice(0, n2), "lam_p": slice(n2, n2 + N2), "lam_v": slice(n2 + N2, None)}
     states = _group_difference(x_dir, x_ind, state_groups)
     controls = _group_difference(direct.u.reshape(len(direct.t_u), -1), u_ind, {"u": slice(None)})
     costates = _group_difference(with_matrix_costate(lam_dir), with_matrix_costate(lam_ind), costate_groups)
@@ -132,7 +135,9 @@ def _bvp_block(bvp: BVPSolution, solver: str, time_s: float) -> dict[str, Any]:
     }
 
 
-def solve_both(problem: Problem, progress: Callable[[HomotopyStep], None] | None = None) -> ComparedSolution:
+def solve_both(
+    problem: Problem, progress: Callable[[HomotopyStep], None] | None = None, init: Solution | None = None
+) -> ComparedSolution:
     """Solve ``problem`` directly and indirectly; return the direct solution with the comparison in ``stats``.
 
     Parameters
@@ -140,13 +145,15 @@ def solve_both(problem: Problem, progress: Callable[[HomotopyStep], None] | None
     problem : Problem
     progress : callable, optional
         Called with every :class:`HomotopyStep` of the direct, then of the indirect continuation.
+    init : Solution, optional
+        Warm start of the direct method (see :func:`~mobisense.ocp.direct.solver.solve_direct`).
 
     Returns
     -------
     ComparedSolution
         ``method="both"``; ``status="solved"`` only if both methods reached ε = 1.
     """
-    direct = solve_direct(problem, progress=progress)
+    direct = solve_direct(problem, progress=progress, init=init)
     indirect, bvp = indirect_continuation(problem, progress=progress)
     stats: dict[str, Any] = dict(direct.stats)
     stats["direct_time_s"] = direct.stats.get("total_time_s")

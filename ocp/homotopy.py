@@ -13,9 +13,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from ocp.problem import HomotopyOptions
+from mobisense.ocp.problem import HomotopyOptions
+from mobisense.ocp.registries import HOMOTOPY_MODES
 
-__all__ = ["run_continuation", "fixed_schedule"]
+__all__ = ["run_continuation", "fixed_schedule", "fixed_continuation", "adaptive_continuation", "direct_to_one"]
 
 
 def fixed_schedule(step: float) -> list[float]:
@@ -26,18 +27,18 @@ def fixed_schedule(step: float) -> list[float]:
     return [min(1.0, round(k * step, 12)) for k in range(1, steps + 1)]
 
 
-def run_continuation(attempt: Callable[[float], bool], options: HomotopyOptions) -> float:
-    """Drive ``attempt`` from ε ≈ 0 to ε = 1; return the last ε that succeeded (0.0 if none)."""
-    if options.mode == "none":
-        return 1.0 if attempt(1.0) else 0.0
-    if options.mode == "fixed":
-        accepted = 0.0
-        for eps in fixed_schedule(options.step):
-            if not attempt(eps):
-                return accepted
-            accepted = eps
-        return accepted
-    # adaptive
+def fixed_continuation(attempt: Callable[[float], bool], options: HomotopyOptions) -> float:
+    """ε = δ, 2δ, …, 1; stop at the first failure. Returns the last ε solved (0.0 if none)."""
+    accepted = 0.0
+    for eps in fixed_schedule(options.step):
+        if not attempt(eps):
+            return accepted
+        accepted = eps
+    return accepted
+
+
+def adaptive_continuation(attempt: Callable[[float], bool], options: HomotopyOptions) -> float:
+    """Grow the step by ``growth`` after a success, halve it after a failure; give up below ``min_step``."""
     accepted, step = 0.0, options.step
     while accepted < 1.0:
         eps = min(1.0, round(accepted + step, 12))
@@ -49,3 +50,13 @@ def run_continuation(attempt: Callable[[float], bool], options: HomotopyOptions)
             if step < options.min_step:
                 return accepted
     return accepted
+
+
+def direct_to_one(attempt: Callable[[float], bool], options: HomotopyOptions) -> float:
+    """No continuation: solve ε = 1 directly."""
+    return 1.0 if attempt(1.0) else 0.0
+
+
+def run_continuation(attempt: Callable[[float], bool], options: HomotopyOptions) -> float:
+    """Drive ``attempt`` from ε ≈ 0 to ε = 1 with the mode's driver; return the last ε that succeeded (0.0 if none)."""
+    return HOMOTOPY_MODES[options.mode](attempt, options)

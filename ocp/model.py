@@ -1,7 +1,7 @@
 """Symbolic model of the mobile-sensor Kalman problem (SPEC §1.1): one implementation of each equation.
 
-State vector ``x = [σ, p_1, …, p_N, v_1, …, v_N]`` with ``σ`` the upper triangle of Σ (row-major,
-n(n+1)/2 entries), positions p_i (L) and velocities v_i (L/T); controls ``u = [u_1, …, u_N]`` (L/T²).
+State vector ``x = [σ, p_1, …, p_N, v_1, …, v_N]`` and controls ``u = [u_1, …, u_N]`` as laid out by
+:class:`~mobisense.ocp.state_layout.StateLayout`.
 Every number of the problem (ε, weights, matrices, initial and terminal data, noise parameters,
 scales) is a symbolic NLP parameter laid out by :class:`ParameterLayout`, so one CasADi graph serves
 every problem of the same :class:`Structure`; only the structure triggers a rebuild.
@@ -15,56 +15,11 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from ocp.noise_models import NOISE_MODELS
-from ocp.problem import Problem
+from mobisense.ocp.problem import Problem
+from mobisense.ocp.registries import NOISE_MODELS
+from mobisense.ocp.state_layout import StateLayout
 
-__all__ = [
-    "Structure",
-    "ParameterLayout",
-    "SensorKalmanModel",
-    "sym_to_vec",
-    "vec_to_sym",
-    "triangle_labels",
-    "diagonal_indices",
-]
-
-
-# ---------------------------------------------------------------------- symmetric parametrisation
-def _triangle(n: int) -> list[tuple[int, int]]:
-    return [(i, j) for i in range(n) for j in range(i, n)]
-
-
-def diagonal_indices(n: int) -> list[int]:
-    """Positions of the diagonal entries Σ[i,i] in the upper-triangle vector."""
-    return [k for k, (i, j) in enumerate(_triangle(n)) if i == j]
-
-
-def triangle_labels(n: int) -> list[str]:
-    """Names of the upper-triangle entries, ``['Σ[0,0]', 'Σ[0,1]', …]``."""
-    return [f"Σ[{i},{j}]" for i, j in _triangle(n)]
-
-
-def sym_to_vec(S: Any, n: int) -> Any:
-    """Upper triangle (row-major) of a symmetric n×n matrix (numpy or CasADi) as a vector."""
-    entries = [S[i, j] for i, j in _triangle(n)]
-    if isinstance(S, np.ndarray):
-        return np.array(entries)
-    return ca.vertcat(*entries)
-
-
-def vec_to_sym(s: Any, n: int) -> Any:
-    """Symmetric n×n matrix from its upper-triangle vector (numpy ``(..., k)`` or CasADi column)."""
-    if isinstance(s, np.ndarray):
-        out = np.zeros(s.shape[:-1] + (n, n))
-        for k, (i, j) in enumerate(_triangle(n)):
-            out[..., i, j] = s[..., k]
-            out[..., j, i] = s[..., k]
-        return out
-    rows = [[None] * n for _ in range(n)]
-    for k, (i, j) in enumerate(_triangle(n)):
-        rows[i][j] = s[k]
-        rows[j][i] = s[k]
-    return ca.vertcat(*[ca.horzcat(*row) for row in rows])
+__all__ = ["Structure", "ParameterLayout", "SensorKalmanModel"]
 
 
 # ---------------------------------------------------------------------- structure and parameters
@@ -98,26 +53,24 @@ class Structure:
         return len(self.rows)
 
     @property
+    def state(self) -> StateLayout:
+        """The layout of the state vector x = [σ, p, v]."""
+        return StateLayout(self.n, self.N)
+
+    @property
     def n_sigma(self) -> int:
         """Number of covariance states n(n+1)/2."""
-        return self.n * (self.n + 1) // 2
+        return self.state.n_sigma
 
     @property
     def nx(self) -> int:
         """State dimension n(n+1)/2 + 4N."""
-        return self.n_sigma + 4 * self.N
+        return self.state.nx
 
     @property
     def nu(self) -> int:
         """Control dimension 2N."""
-        return 2 * self.N
-
-    def state_labels(self, sensor_names: list[str]) -> list[str]:
-        """Readable name of every state component (used to report violated constraints)."""
-        labels = triangle_labels(self.n)
-        labels += [f"sensor {name} position {c}" for name in sensor_names for c in "xy"]
-        labels += [f"sensor {name} velocity {c}" for name in sensor_names for c in "xy"]
-        return labels
+        return self.state.nu
 
 
 class ParameterLayout:
@@ -247,26 +200,23 @@ class SensorKalmanModel:
         P = ca.SX.sym("P", self.layout.size)
         b = self.layout.unpack(P)
         n, N = s.n, s.N
-        Sigma = vec_to_sym(x[: s.n_sigma], n)
-        pos = [x[s.n_sigma + 2 * i : s.n_sigma + 2 * i + 2] for i in range(N)]
-        vel = [x[s.n_sigma + 2 * N + 2 * i : s.n_sigma + 2 * N + 2 * i + 2] for i in range(N)]
+        Sigma, pos, vel = s.state.symbolic(x)
         S = self._information(pos, b)
         # SPEC §1.1: Σ' = A Σ + Σ A' + B Q B' − Σ C' R(p)^-1 C Σ
         Sigma_dot = b["A"] @ Sigma + Sigma @ b["A"].T + b["BQB"] - Sigma @ S @ Sigma
-        xdot = ca.vertcat(sym_to_vec(Sigma_dot, n), *vel, u)
+        xdot = s.state.join_symbolic(Sigma_dot, vel, u)
         energy = 0.5 * b["alpha"] * ca.sumsqr(u)
         self.f = ca.Function("f", [x, u, P], [xdot], ["x", "u", "P"], ["xdot"])
         self.running = ca.Function(
             "running", [x, u, P], [ca.vertcat(energy + ca.trace(b["K"] @ Sigma), energy)], ["x", "u", "P"], ["L"]
         )
         self.terminal = ca.Function("terminal", [x, P], [ca.trace(b["M"] @ Sigma)], ["x", "P"], ["Phi"])
-        x0 = ca.vertcat(
-            sym_to_vec(b["Sigma0"], n), *[b[f"p0_{i}"] for i in range(N)], *[b[f"v0_{i}"] for i in range(N)]
+        x0 = s.state.join_symbolic(
+            b["Sigma0"], [b[f"p0_{i}"] for i in range(N)], [b[f"v0_{i}"] for i in range(N)]
         )
         self.x0 = ca.Function("x0", [P], [x0], ["P"], ["x0"])
-        sigma_scale = sym_to_vec(b["sigma_scale"], n)
-        x_scale = ca.vertcat(
-            sigma_scale, ca.repmat(b["length_scale"], 2 * N, 1), ca.repmat(b["velocity_scale"], 2 * N, 1)
+        x_scale = s.state.join_symbolic(
+            b["sigma_scale"], ca.repmat(b["length_scale"], 2 * N, 1), ca.repmat(b["velocity_scale"], 2 * N, 1)
         )
         self.scales = ca.Function(
             "scales", [P], [x_scale, ca.repmat(b["control_scale"], s.nu, 1)], ["P"], ["x_scale", "u_scale"]
@@ -293,8 +243,7 @@ class SensorKalmanModel:
         b = self.layout.unpack(P)
         residuals, labels = [], []
         for i in range(s.N):
-            p = x[s.n_sigma + 2 * i : s.n_sigma + 2 * i + 2]
-            v = x[s.n_sigma + 2 * s.N + 2 * i : s.n_sigma + 2 * s.N + 2 * i + 2]
+            p, v = x[s.state.position(i)], x[s.state.velocity(i)]
             if s.fixed_position[i]:
                 residuals.append((p - b[f"pT_{i}"]) / b["length_scale"])
                 labels += [(f"terminal position {c}", i) for c in "xy"]
@@ -310,6 +259,6 @@ class SensorKalmanModel:
         out, which = [], []
         for i in range(s.N):
             if s.bounded_control[i]:
-                out.append((ca.sumsqr(u[2 * i : 2 * i + 2]) - b[f"umax_{i}"] ** 2) / b["control_scale"] ** 2)
+                out.append((ca.sumsqr(u[s.state.control(i)]) - b[f"umax_{i}"] ** 2) / b["control_scale"] ** 2)
                 which.append(i)
         return (ca.vertcat(*out) if out else type(u)(0, 1)), which

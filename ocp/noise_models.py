@@ -1,6 +1,7 @@
-"""Registry of sensor measurement-noise models r(p): variance of one measurement row vs. sensor position.
+"""Sensor measurement-noise models r(p): the variance of one measurement row vs. the sensor position.
 
-A model is a pydantic class (its YAML keys) that also supplies the symbolic variance. To add one::
+A model is a pydantic class (its YAML keys) that also supplies the symbolic variance, registered by name in
+:data:`mobisense.ocp.registries.NOISE_MODELS`. To add one in your own code::
 
     @register_noise_model
     class Exponential(NoiseModel):
@@ -17,7 +18,11 @@ A model is a pydantic class (its YAML keys) that also supplies the symbolic vari
 
 ``variance`` receives CasADi expressions: ``p`` (2,) sensor position, ``s`` (2,) the location the row
 measures, ``theta`` the model's numeric parameters (NLP parameters, so sweeps over them need no rebuild).
-It must be positive for every position.
+It must be positive for every position. An installed package can make its model available to every problem
+file without being imported first, through the entry-point group ``mobisense.noise_models``::
+
+    [project.entry-points."mobisense.noise_models"]
+    exponential = "my_package.noise:Exponential"
 """
 
 from __future__ import annotations
@@ -26,9 +31,10 @@ from typing import Any, ClassVar, Literal
 
 import casadi as ca
 
-from ocp.config import PositiveFloat, StrictModel
+from mobisense.core.config import PositiveFloat, StrictModel
+from mobisense.ocp.registries import NOISE_MODELS
 
-__all__ = ["NoiseModel", "QuadraticRange", "ConstantNoise", "NOISE_MODELS", "register_noise_model", "parse_noise"]
+__all__ = ["NoiseModel", "QuadraticRange", "ConstantNoise", "register_noise_model", "parse_noise"]
 
 
 class NoiseModel(StrictModel):
@@ -48,17 +54,12 @@ class NoiseModel(StrictModel):
         raise NotImplementedError
 
 
-#: model name -> NoiseModel subclass
-NOISE_MODELS: dict[str, type[NoiseModel]] = {}
-
-
 def register_noise_model(cls: type[NoiseModel]) -> type[NoiseModel]:
     """Class decorator: make ``cls`` available as ``noise: {model: <name>, …}`` in problem files."""
     name = cls.model_fields["model"].default
     if not isinstance(name, str) or not name:
         raise TypeError(f"{cls.__name__}.model needs a string default naming the model")
-    NOISE_MODELS[name] = cls
-    return cls
+    return NOISE_MODELS.register(name, cls)
 
 
 @register_noise_model
@@ -103,8 +104,11 @@ def parse_noise(value: Any) -> NoiseModel:
     if isinstance(value, NoiseModel):
         return value
     if not isinstance(value, dict) or "model" not in value:
-        raise ValueError(f"expected a mapping with a 'model' key, one of {sorted(NOISE_MODELS)}")
+        raise ValueError(f"expected a mapping with a 'model' key, one of {NOISE_MODELS.names()}")
     name = value["model"]
     if name not in NOISE_MODELS:
-        raise ValueError(f"unknown noise model {name!r}; expected one of {sorted(NOISE_MODELS)}")
-    return NOISE_MODELS[name].model_validate(value)
+        raise ValueError(NOISE_MODELS.unknown(name))
+    model = NOISE_MODELS[name]
+    if not (isinstance(model, type) and issubclass(model, NoiseModel)):
+        raise ValueError(f"noise model {name!r} is registered as {model!r}, which is not a NoiseModel subclass")
+    return model.model_validate(value)

@@ -21,12 +21,12 @@ from __future__ import annotations
 import hashlib
 import json
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 import numpy as np
 from pydantic import BeforeValidator, Field, SerializeAsAny, model_validator
 
-from ocp.config import (
+from mobisense.core.config import (
     FiniteFloat,
     InvalidValue,
     Matrix,
@@ -40,7 +40,8 @@ from ocp.config import (
     load_config,
     parse_config,
 )
-from ocp.noise_models import NoiseModel, parse_noise
+from mobisense.ocp.noise_models import NoiseModel, parse_noise
+from mobisense.ocp.registries import BVPSolverName, HomotopyModeName, MethodName, SchemeName
 
 __all__ = [
     "Horizon",
@@ -127,7 +128,7 @@ class Cost(StrictModel):
 class CollocationOptions(StrictModel):
     """Direct-collocation transcription: scheme, polynomial degree, number of intervals."""
 
-    scheme: Literal["radau", "legendre"] = "radau"
+    scheme: SchemeName = "radau"
     degree: int = Field(3, ge=1, le=9)
     intervals: int = Field(100, ge=1, le=100_000)
 
@@ -135,7 +136,7 @@ class CollocationOptions(StrictModel):
 class HomotopyOptions(StrictModel):
     """ε-continuation (SPEC §1.3): ``fixed`` steps of ``step``, ``adaptive`` steps, or ``none``."""
 
-    mode: Literal["fixed", "adaptive", "none"] = "fixed"
+    mode: HomotopyModeName = "fixed"
     step: float = Field(0.05, gt=0.0, le=1.0)
     min_step: float = Field(1e-3, gt=0.0, le=1.0)
     growth: float = Field(2.0, ge=1.0, le=10.0)
@@ -150,9 +151,9 @@ class BVPOptions(StrictModel):
     ``polish`` the collocation result at ε = 1 is re-solved by ``solve_bvp`` on an adaptive mesh.
     """
 
-    solver: Literal["collocation", "scipy"] = "collocation"
-    refine_solver: Literal["scipy", "collocation"] = Field(
-        "scipy", description="solver of the direct-seeded refinement (method 'both')"
+    solver: BVPSolverName = Field("collocation", description="BVP solver of the ε-continuation")
+    refine_solver: BVPSolverName = Field(
+        "scipy", description="BVP solver of the direct-seeded refinement (method 'both')"
     )
     intervals: int | None = Field(None, ge=2, le=100_000)
     tolerance: float = Field(1e-10, gt=0.0, lt=1e-2)
@@ -168,7 +169,7 @@ class BVPOptions(StrictModel):
 class SolverOptions(StrictModel):
     """How to solve: method, transcription, homotopy and Ipopt tolerances."""
 
-    method: Literal["direct", "indirect", "both"] = "direct"
+    method: MethodName = Field("direct", description="direct collocation, indirect (PMP) or both")
     collocation: CollocationOptions = CollocationOptions()
     homotopy: HomotopyOptions = HomotopyOptions()
     bvp: BVPOptions = BVPOptions()
@@ -276,10 +277,10 @@ class Problem(StrictModel):
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "<dict>") -> Problem:
-        """Validate a dict (e.g. parsed YAML); raises :class:`ocp.config.ConfigError`."""
+        """Validate a dict (e.g. parsed YAML); raises :class:`mobisense.core.config.ConfigError`."""
         return parse_config(data, cls, source=source)
 
 
 def load_problem(path: str | Path) -> Problem:
-    """Read and validate a problem YAML file; raises :class:`ocp.config.ConfigError` (one line)."""
+    """Read and validate a problem YAML file; raises :class:`mobisense.core.config.ConfigError` (one line)."""
     return load_config(path, Problem)

@@ -9,10 +9,10 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from ocp.homotopy import fixed_schedule
-from ocp.problem import Problem
-from ocp.solution import HomotopyStep, Solution
-from ocp.solve import solve
+from mobisense.ocp.homotopy import fixed_schedule
+from mobisense.ocp.problem import Problem
+from mobisense.ocp.solution import HomotopyStep, Solution
+from mobisense.ocp.solving import solve
 
 __all__ = ["SolveReporter"]
 

@@ -14,7 +14,7 @@ import casadi as ca
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from ocp.model import SensorKalmanModel
+from mobisense.ocp.model import SensorKalmanModel
 
 __all__ = ["Trajectory", "integrate", "coast"]
 
@@ -48,7 +48,7 @@ def integrate(
     ----------
     model : SensorKalmanModel
     P : ndarray, shape (n_parameters,)
-        Packed parameters (see :class:`ocp.model.ParameterLayout`).
+        Packed parameters (see :class:`mobisense.ocp.model.ParameterLayout`).
     t_eval : ndarray, shape (T,)
         Output times (T); the first and last define the horizon.
     control : callable, optional

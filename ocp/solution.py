@@ -11,16 +11,47 @@ from __future__ import annotations
 
 import json
 from dataclasses import asdict, dataclass, field
+from enum import Enum
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
 
-from ocp.files import to_jsonable, write_json, write_netcdf
-from ocp.problem import Problem
+from mobisense.core.files import to_jsonable, write_json, write_netcdf
+from mobisense.ocp.problem import Problem
+from mobisense.ocp.state_layout import StateLayout
 
-__all__ = ["HomotopyStep", "Solution"]
+__all__ = ["SolveStatus", "StartKind", "HomotopyStep", "TrajectorySample", "Solution"]
+
+
+class SolveStatus(str, Enum):
+    """Outcome of a solve: ``solved`` (ε = 1 reached and converged) or ``failed`` (what was solved is kept)."""
+
+    SOLVED = "solved"
+    FAILED = "failed"
+
+
+class StartKind(str, Enum):
+    """How a direct solve started (``stats["start"]``; the value is what ``summary.json`` shows)."""
+
+    CONTINUATION = "continuation from coasting"
+    WARM = "warm start from init"
+    WARM_FAILED = "warm start from init failed; continuation from coasting"
+    GUESS = "initial guess, ε = 1 directly"
+    INIT_WITHOUT_POINT = "init ignored: it carries no converged ε = 1 NLP point"
+    INIT_OTHER_LAYOUT = "init ignored: different structure or grid"
+
+
+@dataclass
+class TrajectorySample:
+    """A solution evaluated at chosen times: ``t`` (T,), ``Sigma`` (T, n, n), ``p``, ``v``, ``u`` (T, N, 2)."""
+
+    t: np.ndarray
+    Sigma: np.ndarray
+    p: np.ndarray
+    v: np.ndarray
+    u: np.ndarray
 
 
 @dataclass
@@ -46,7 +77,7 @@ class Solution:
 
     problem: Problem
     method: str
-    status: str
+    status: SolveStatus
     message: str
     eps: float
     t: np.ndarray
@@ -70,6 +101,104 @@ class Solution:
     stats: dict[str, Any] = field(default_factory=dict)
     #: the converged NLP point (scaled w, lam_w, lam_g, parameters P, layout signature) for warm starts
     nlp: dict[str, Any] | None = None
+    #: (scheme, degree, intervals) when the states are collocation polynomials on a uniform grid
+    collocation: tuple[str, int, int] | None = None
+
+    def __post_init__(self) -> None:
+        self.status = SolveStatus(self.status)
+
+    # ------------------------------------------------------------------ building
+    @classmethod
+    def from_states(
+        cls,
+        problem: Problem,
+        method: str,
+        status: SolveStatus | str,
+        message: str,
+        eps: float,
+        t: np.ndarray,
+        x: np.ndarray,
+        t_u: np.ndarray,
+        u: np.ndarray,
+        costs: tuple[float, float, float],
+        t_costate: np.ndarray | None = None,
+        lam: np.ndarray | None = None,
+        path_eps: np.ndarray | None = None,
+        path_x: np.ndarray | None = None,
+        **extra: Any,
+    ) -> Solution:
+        """The one way to build a Solution from state vectors (direct and indirect methods alike).
+
+        Parameters
+        ----------
+        problem : Problem
+        method : str
+            ``"direct"``, ``"indirect"``, …
+        status : SolveStatus or str
+        message : str
+        eps : float
+            The ε of the states (1 when solved).
+        t : ndarray, shape (T,)
+            State times (T).
+        x : ndarray, shape (T, nx)
+            States in the layout of :class:`~mobisense.ocp.state_layout.StateLayout`.
+        t_u : ndarray, shape (Tu,)
+            Control times.
+        u : ndarray, shape (Tu, 2N)
+            Controls (L/T²).
+        costs : tuple of float
+            ``(terminal_cost, running_cost, control_energy)`` of J at ε = 1.
+        t_costate : ndarray, shape (Tc,), optional
+        lam : ndarray, shape (Tc, nx), optional
+            Costates of J (split into Λ, λ_p, λ_v with :meth:`StateLayout.split_costate`).
+        path_eps : ndarray, shape (S,), optional
+            The ε of each accepted homotopy step.
+        path_x : ndarray, shape (S, T, nx), optional
+            The states of each accepted homotopy step on ``t``.
+        **extra
+            Any other field (``homotopy``, ``baseline``, ``stats``, ``nlp``, ``collocation``).
+        """
+        layout = StateLayout(problem.n, problem.N)
+        Sigma, p, v = layout.split(x)
+        solution = cls(
+            problem=problem,
+            method=method,
+            status=SolveStatus(status),
+            message=message,
+            eps=eps,
+            t=np.asarray(t, float),
+            Sigma=Sigma,
+            p=p,
+            v=v,
+            t_u=np.asarray(t_u, float),
+            u=np.asarray(u, float).reshape(len(t_u), problem.N, 2),
+            terminal_cost=costs[0],
+            running_cost=costs[1],
+            control_energy=costs[2],
+            **extra,
+        )
+        if lam is not None:
+            solution.t_costate = np.asarray(t_costate, float)
+            solution.Lam, solution.lam_p, solution.lam_v = layout.split_costate(lam)
+        if path_x is not None:
+            solution.path_eps = np.asarray(path_eps, float)
+            solution.path_Sigma, solution.path_p, _ = layout.split(path_x)
+        return solution
+
+    @property
+    def layout(self) -> StateLayout:
+        """The state layout of this solution's problem."""
+        return StateLayout(self.problem.n, self.problem.N)
+
+    def states(self) -> np.ndarray:
+        """States x (T, nx) on :attr:`t`."""
+        return self.layout.join(self.Sigma, self.p, self.v)
+
+    def costates(self) -> np.ndarray:
+        """Costates λ (Tc, nx) on :attr:`t_costate` (``ValueError`` if the solution has none)."""
+        if self.Lam is None:
+            raise ValueError("this solution carries no costates")
+        return self.layout.join_costate(self.Lam, self.lam_p, self.lam_v)
 
     @property
     def cost(self) -> float:
@@ -79,7 +208,7 @@ class Solution:
     @property
     def success(self) -> bool:
         """True when ε = 1 was reached and Ipopt converged."""
-        return self.status == "solved"
+        return self.status is SolveStatus.SOLVED
 
     @property
     def min_sigma_eigenvalue(self) -> float:
@@ -92,7 +221,7 @@ class Solution:
         out: dict[str, Any] = {
             "name": self.problem.name,
             "method": self.method,
-            "status": self.status,
+            "status": self.status.value,
             "message": self.message,
             "eps_reached": self.eps,
             "cost": self.cost,
@@ -159,15 +288,94 @@ class Solution:
             "baseline_json": json.dumps(to_jsonable(self.baseline)),
             "stats_json": json.dumps(to_jsonable(self.stats)),
             "method": self.method,
-            "status": self.status,
+            "status": self.status.value,
             "message": self.message,
             "eps": self.eps,
+            "collocation_json": json.dumps(self.collocation),
             "terminal_cost": self.terminal_cost,
             "running_cost": self.running_cost,
             "control_energy": self.control_energy,
             "conventions": "Sigma/Lam full symmetric matrices; costates of J (minimisation, H = L + lam'f)",
         }
         return xr.Dataset(data, coords=coords, attrs=attrs)
+
+    def to_xarray(self) -> Any:
+        """The solution as an ``xarray.Dataset`` (what :meth:`save` writes as ``solution.nc``)."""
+        return self.to_dataset()
+
+    def sample(self, t: float | np.ndarray) -> TrajectorySample:
+        """Evaluate the solution at any times in [t0, tf].
+
+        For a direct solution the states are the collocation polynomials through each interval's d + 1
+        nodes and the controls the Lagrange polynomials through its d collocation nodes (exactly the
+        functions the NLP optimised); for a solution on BVP nodes, cubic splines through the nodes.
+
+        Parameters
+        ----------
+        t : float or ndarray, shape (T,)
+            Times (T) in [t0, tf].
+
+        Returns
+        -------
+        TrajectorySample
+            ``t`` (T,), ``Sigma`` (T, n, n), ``p`` and ``v`` (T, N, 2), ``u`` (T, N, 2).
+        """
+        times = np.atleast_1d(np.asarray(t, dtype=float))
+        t0, tf = float(self.t[0]), float(self.t[-1])
+        tol = 1e-12 * max(1.0, abs(tf - t0))
+        if times.size and (times.min() < t0 - tol or times.max() > tf + tol):
+            raise ValueError(f"t: expected times in [{t0:g}, {tf:g}], got [{times.min():g}, {times.max():g}]")
+        times = np.clip(times, t0, tf)
+        x = self.states()
+        if self.collocation is not None:
+            x_t, u_t = self._sample_collocation(times, x)
+        else:
+            from scipy.interpolate import CubicSpline
+
+            x_t = CubicSpline(self.t, x, axis=0)(times)
+            u_t = CubicSpline(self.t_u, self.u.reshape(len(self.t_u), -1), axis=0)(times)
+        Sigma, p, v = self.layout.split(x_t)
+        return TrajectorySample(times, Sigma, p, v, u_t.reshape(len(times), self.problem.N, 2))
+
+    def _sample_collocation(self, times: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        from mobisense.ocp.collocation import CollocationScheme
+
+        scheme, degree, K = self.collocation  # type: ignore[misc]
+        colloc = CollocationScheme(scheme, degree)
+        t0, tf = float(self.t[0]), float(self.t[-1])
+        h = (tf - t0) / K
+        # interval k covers (t_k, t_k+1]: a Radau control node at τ = 1 belongs to the interval it ends
+        scaled = (times - t0) / h
+        k = np.clip(np.ceil(scaled - 1e-9).astype(int) - 1, 0, K - 1)
+        s = scaled - k
+        node_times = t0 + h * (np.arange(K)[:, None] + colloc.tau[None, :])  # (K, d+1)
+        tol = 1e-9 * max(1.0, abs(tf - t0))
+        index = np.clip(np.searchsorted(self.t, node_times - tol), 0, len(self.t) - 1)
+        basis = colloc.interpolation_matrix(s, "all")  # (T, d+1)
+        x_t = np.einsum("tj,tjx->tx", basis, x[index[k]])
+        u_nodes = self.u.reshape(K, degree, -1)
+        u_t = np.einsum("tj,tjc->tc", colloc.interpolation_matrix(s, "collocation"), u_nodes[k])
+        return x_t, u_t
+
+    def __repr__(self) -> str:
+        base = self.baseline.get("cost")
+        change = "" if not base else f" ({100.0 * (self.cost - base) / base:+.1f} %)"
+        lines = [
+            f"Solution of {self.problem.name!r} by the {self.method} method: {self.status.value} (ε = {self.eps:g})",
+            f"  J = {self.cost:.10g} = terminal {self.terminal_cost:.6g} + running {self.running_cost:.6g}"
+            f" (control energy {self.control_energy:.6g})",
+        ]
+        if base:
+            lines.append(f"  no-control baseline J = {base:.10g}{change}")
+        lines += [
+            f"  n = {self.problem.n} process states, N = {self.problem.N} sensors, "
+            f"t ∈ [{self.t[0]:g}, {self.t[-1]:g}]: {len(self.t)} state times, {len(self.t_u)} control times",
+            f"  costates: {'on ' + str(len(self.t_costate)) + ' times' if self.t_costate is not None else 'none'}; "
+            f"homotopy: {len(self.homotopy)} steps, {sum(s.iterations for s in self.homotopy)} iterations, "
+            f"{sum(s.time_s for s in self.homotopy):.3g} s",
+            f"  {self.message}",
+        ]
+        return "\n".join(lines)
 
     def save(self, folder: str | Path) -> None:
         """Write ``solution.nc`` and ``summary.json`` into ``folder`` (atomically)."""
@@ -207,6 +415,9 @@ class Solution:
             path_Sigma=ds["path_Sigma"].values if has_path else None,
             baseline=json.loads(a["baseline_json"]),
             stats=json.loads(a["stats_json"]),
+            collocation=None
+            if a.get("collocation_json") in (None, "null")
+            else tuple(json.loads(a["collocation_json"])),
             nlp=None
             if "nlp_w" not in ds
             else {

@@ -1,35 +1,51 @@
-"""One-shot entry point: ``solve(problem)`` with the method named in its solver options (or given)."""
+"""One-shot entry point: ``solve(problem, method=…, init=…)`` with any registered method."""
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
-from ocp.config import ConfigError
-from ocp.problem import Problem
-from ocp.solution import HomotopyStep, Solution
+from mobisense.core.config import ConfigError
+from mobisense.ocp.problem import Problem, load_problem
+from mobisense.ocp.registries import METHODS
+from mobisense.ocp.solution import HomotopyStep, Solution
 
-__all__ = ["METHODS", "solve"]
-
-#: solver.method -> "module:function" taking (problem, progress=callable) and returning a Solution
-METHODS: dict[str, str] = {
-    "direct": "ocp.direct:solve_direct",
-    "indirect": "ocp.indirect:solve_indirect",
-    "both": "ocp.compare:solve_both",
-}
+__all__ = ["solve"]
 
 
 def solve(
-    problem: Problem, method: str | None = None, progress: Callable[[HomotopyStep], Any] | None = None
+    problem: Problem | str | Path,
+    method: str | None = None,
+    *,
+    init: Solution | None = None,
+    progress: Callable[[HomotopyStep], Any] | None = None,
 ) -> Solution:
-    """Solve ``problem`` with ``method`` (default ``problem.solver.method``)."""
+    """Solve a mobile-sensor Kalman problem.
+
+    Parameters
+    ----------
+    problem : Problem, str or Path
+        The problem, or the path of its YAML file (or the name of a shipped example, see
+        :func:`mobisense.ocp.problem.load_problem`).
+    method : str, optional
+        A name in :data:`mobisense.ocp.registries.METHODS` (``"direct"``, ``"indirect"``, ``"both"``);
+        default ``problem.solver.method``.
+    init : Solution, optional
+        A previous solution of a problem of the same structure and grid (e.g. with other weights):
+        its primal–dual point warm-starts ε = 1 directly (continuation from the coasting solution if
+        that fails) — continuation as plain data flow.
+    progress : callable, optional
+        Called with each :class:`~mobisense.ocp.solution.HomotopyStep` as it finishes.
+
+    Returns
+    -------
+    Solution
+        ``status`` tells whether ε = 1 was reached; a failed solve keeps what was solved.
+    """
+    if not isinstance(problem, Problem):
+        problem = load_problem(problem)
     method = method or problem.solver.method
-    module_name, function_name = METHODS[method].split(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ModuleNotFoundError:
-        raise ConfigError(
-            f"solver.method: method {method!r} is not available in this installation; use 'direct'"
-        ) from None
-    return getattr(module, function_name)(problem, progress=progress)
+    if method not in METHODS:
+        raise ConfigError(f"solver.method: {METHODS.unknown(method)}")
+    return METHODS[method](problem, progress=progress, init=init)

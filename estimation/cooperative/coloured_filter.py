@@ -16,8 +16,8 @@ modelled as first-order Markov, ``w_k = A^w w_{k−1} + η`` with ``A^w = V_k W_
     (which omits η). The one approximation left is the seed's: ``v_{k−1}`` also enters ``p̄_{k−1}``,
     a correlation the method ignores (exact when ``U = 0`` and ``R → 0``).
 
-Both return a :class:`~estimation.cooperative_filter.CooperativeFilterResult` for ``s`` and are batched
-like :func:`~estimation.cooperative_filter.run_cooperative_filter`.
+Both return a :class:`~mobisense.estimation.cooperative.filter.CooperativeFilterResult` for ``s`` and are batched
+like :func:`~mobisense.estimation.cooperative.filter.run_cooperative_filter`.
 """
 
 from __future__ import annotations
@@ -26,17 +26,17 @@ from typing import Literal
 
 import numpy as np
 
-from estimation import kalman
-from estimation.cooperative_filter import CooperativeFilterResult, _check_inputs
-from estimation.information_model import (
+from mobisense.estimation import kalman
+from mobisense.estimation.cooperative.filter import CooperativeFilterResult, check_filter_inputs
+from mobisense.estimation.cooperative.information_model import (
     formation_center,
     hessian_drift,
     hessian_to_vec,
     taylor_matrices,
     transition_matrix,
 )
-from estimation.noise_config import CooperativeNoise
-from estimation.spatial_noise import SpatialNoise
+from mobisense.estimation.cooperative.noise_config import CooperativeNoise
+from mobisense.estimation.cooperative.spatial_noise import SpatialNoise
 
 __all__ = ["run_coloured_filter"]
 
@@ -83,7 +83,7 @@ def run_coloured_filter(
     """
     positions = np.asarray(positions, dtype=float)
     measurements = np.asarray(measurements, dtype=float)
-    _check_inputs(positions, measurements)
+    check_filter_inputs(positions, measurements)
     H = np.zeros(positions.shape[:-2] + (2, 2)) if hessians is None else np.asarray(hessians, dtype=float)
     if method not in ("augmented", "differenced"):
         raise ValueError(f"method: expected 'augmented' or 'differenced', got {method!r}")

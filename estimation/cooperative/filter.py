@@ -1,6 +1,7 @@
 """Cooperative Kalman filter for N ≥ 3 platforms in any shape (SPEC §2.2, eqs. 13-17, case w = 0).
 
-Three ways in, one set of equations (:mod:`estimation.kalman`, :mod:`estimation.information_model`):
+Three ways in, one set of equations (:mod:`mobisense.estimation.kalman`,
+:mod:`mobisense.estimation.cooperative.information_model`):
 
 * :class:`CooperativeKalmanFilter` — step by step (``predict`` then ``update``), for closed loops where
   positions and Hessian estimates are produced as the mission goes;
@@ -12,20 +13,20 @@ Three ways in, one set of equations (:mod:`estimation.kalman`, :mod:`estimation.
 
 The Hessian input ``Ĥ_{c,k}`` (SPEC §2.1) is either an array ``(..., K, 2, 2)`` (known or previously
 estimated), ``None`` (zero), or a :class:`HessianSource` called at each step (closed loop, e.g.
-:class:`estimation.hessian_estimation.CurvatureHessian`). A single run with array Hessians is rolled
+:class:`mobisense.estimation.cooperative.hessian.CurvatureHessian`). A single run with array Hessians is rolled
 out by a CasADi function built from the same kernels (``engine="casadi"``, information form of eq. 17,
 JIT-compiled to C when a compiler is available), 5-10x faster than filterpy stepping the same model
 (``benchmarks/bench_filters.py``).
 
 Note: the state equation carries the second-order value term ``½ Δr' Ĥ Δr`` in ``h`` (see
-:func:`~estimation.information_model.hessian_drift`), so it is exact on quadratic fields.
+:func:`~mobisense.estimation.cooperative.information_model.hessian_drift`), so it is exact on quadratic fields.
 
 Example
 -------
 >>> import numpy as np
->>> from estimation.cooperative_filter import run_cooperative_filter
->>> from estimation.information_model import cross_formation
->>> from estimation.noise_config import CooperativeNoise
+>>> from mobisense.estimation.cooperative.filter import run_cooperative_filter
+>>> from mobisense.estimation.cooperative.information_model import cross_formation
+>>> from mobisense.estimation.cooperative.noise_config import CooperativeNoise
 >>> positions = cross_formation(1.0, 1.0, center=np.c_[np.linspace(0, 5, 6), np.zeros(6)])
 >>> result = run_cooperative_filter(positions, np.zeros((6, 4)), CooperativeNoise.from_sigmas(0.1, 0.5, 0.0),
 ...                                 initial_state=np.zeros(3), initial_covariance=np.eye(3))
@@ -41,17 +42,24 @@ from typing import Any, Literal, Protocol
 
 import numpy as np
 
-from estimation import kalman
-from estimation.information_model import (
+from mobisense.estimation import kalman
+from mobisense.estimation.cooperative.information_model import (
     formation_center,
     hessian_drift,
     hessian_to_vec,
     taylor_matrices,
     transition_matrix,
 )
-from estimation.noise_config import CooperativeNoise
+from mobisense.estimation.cooperative.noise_config import CooperativeNoise
 
-__all__ = ["HessianSource", "CooperativeKalmanFilter", "CooperativeFilterResult", "run_cooperative_filter"]
+__all__ = [
+    "HessianSource",
+    "CooperativeKalmanFilter",
+    "CooperativeFilterResult",
+    "run_cooperative_filter",
+    "check_filter_inputs",
+    "model_sequence",
+]
 
 
 class HessianSource(Protocol):
@@ -218,7 +226,8 @@ class CooperativeKalmanFilter:
 
 
 # ------------------------------------------------------------------------------------------ one shot
-def _check_inputs(positions: np.ndarray, measurements: np.ndarray) -> None:
+def check_filter_inputs(positions: np.ndarray, measurements: np.ndarray) -> None:
+    """Raise ``ValueError`` unless positions are ``([B,] K, N, 2)`` and measurements ``([B,] K, N)``."""
     if positions.ndim < 3 or positions.shape[-1] != 2:
         raise ValueError(f"positions: expected shape ([B,] K, N, 2), got {positions.shape}")
     if measurements.shape[-2:] != positions.shape[-3:-1]:
@@ -233,7 +242,7 @@ def _check_inputs(positions: np.ndarray, measurements: np.ndarray) -> None:
         )
 
 
-def _model_sequence(positions: np.ndarray, hessians: np.ndarray, noise: CooperativeNoise) -> dict[str, np.ndarray]:
+def model_sequence(positions: np.ndarray, hessians: np.ndarray, noise: CooperativeNoise) -> dict[str, np.ndarray]:
     """Matrices of every step at once: ``F_k, u_k, Q_k, C_k, (D Ĥ)_k, (D U D' + R)_k``.
 
     Step 0 has ``F = I, u = 0, Q = 0`` so the first update fuses the initial prior directly.
@@ -390,7 +399,7 @@ def run_cooperative_filter(
     """
     positions = np.asarray(positions, dtype=float)
     measurements = np.asarray(measurements, dtype=float)
-    _check_inputs(positions, measurements)
+    check_filter_inputs(positions, measurements)
     x0 = np.asarray(initial_state, dtype=float)
     P0 = np.asarray(initial_covariance, dtype=float)
     closed_loop = hessians is not None and callable(hessians)
@@ -403,7 +412,7 @@ def run_cooperative_filter(
         H0 = np.zeros((2, 2)) if initial_hessian is None else np.asarray(initial_hessian, dtype=float)
         return _run_closed_loop(positions, measurements, noise, x0, P0, hessians, H0)
     hessian_array = np.zeros(positions.shape[:-2] + (2, 2)) if hessians is None else np.asarray(hessians, float)
-    model = _model_sequence(positions, hessian_array, noise)
+    model = model_sequence(positions, hessian_array, noise)
     roll = _rollout_casadi if engine == "casadi" else _rollout_numpy
     out = roll(model, measurements, x0, P0)
     return CooperativeFilterResult(

@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 from scipy.optimize import OptimizeResult
 
-from estimation.noise_config import CooperativeNoise
-from estimation.steady_state import cross_steady_state, cross_trace_function
+from mobisense.estimation.cooperative.noise_config import CooperativeNoise
+from mobisense.estimation.cooperative.steady_state import cross_steady_state, cross_trace_function
 
 __all__ = ["ShapeDesign", "minimise_shape", "design_cross_formation", "adaptive_shape_step", "cross_taylor_symbolic"]
 
@@ -187,7 +187,7 @@ def design_cross_formation(
 ) -> ShapeDesign:
     """Cross formation ``(a, b)`` minimising ``tr P∞`` (SPEC §2.4, Prop. 3.14) within bounds.
 
-    The result also carries ``steady_state`` (:class:`~estimation.steady_state.SteadyState` at the
+    The result also carries ``steady_state`` (:class:`~mobisense.estimation.cooperative.steady_state.SteadyState` at the
     optimum: ``P∞`` diagonal, gain ``K∞``).
     """
     f = cross_trace_function()
@@ -205,8 +205,8 @@ def design_cross_formation(
 def cross_taylor_symbolic(a: Any, b: Any, orientation: Any) -> tuple[Any, Any]:
     """CasADi ``C (4×3)`` and ``D (4×4)`` of the cross rotated by ``orientation`` (SPEC §2.1, eqs. 4-5).
 
-    Same rows as :func:`estimation.information_model.taylor_matrices` of
-    :func:`~estimation.information_model.cross_formation` (tested), as expressions of ``a, b``.
+    Same rows as :func:`mobisense.estimation.cooperative.information_model.taylor_matrices` of
+    :func:`~mobisense.estimation.cooperative.information_model.cross_formation` (tested), as expressions of ``a, b``.
     """
     import casadi as ca
 

@@ -6,7 +6,7 @@
   curve through the centre and the arc-length derivative of ``‖∇z‖`` give the Hessian in the Frenet
   frame (eqs. 35-37), the Taylor equations give the rest;
 * :class:`CurvatureHessian`, :class:`LeastSquaresHessian` — the two as closed-loop
-  :class:`~estimation.cooperative_filter.HessianSource` for :func:`run_cooperative_filter`.
+  :class:`~mobisense.estimation.cooperative.filter.HessianSource` for :func:`run_cooperative_filter`.
 
 All functions are batched over leading dimensions.
 
@@ -32,9 +32,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation.information_model import hessian_to_vec, relative_positions, taylor_matrices
-from estimation.noise_config import CooperativeNoise
-from estimation.spatial_noise import SpatialNoise
+from mobisense.estimation.cooperative.information_model import hessian_to_vec, relative_positions, taylor_matrices
+from mobisense.estimation.cooperative.noise_config import CooperativeNoise
+from mobisense.estimation.cooperative.spatial_noise import SpatialNoise
+from mobisense.estimation.fields.base import level_curve_frame
 
 __all__ = [
     "one_step_filter",
@@ -132,14 +133,6 @@ def least_squares_hessian(
     return theta[..., :3], _entries_to_matrix(theta[..., 3:])
 
 
-def _frenet(gradient: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Unit normal ``y1 = ∇z/‖∇z‖``, tangent ``x1`` (``x1 × y1`` out of the page) and ``‖∇z‖``."""
-    norm = np.linalg.norm(gradient, axis=-1)
-    y1 = gradient / norm[..., None]
-    x1 = np.stack([y1[..., 1], -y1[..., 0]], axis=-1)
-    return x1, y1, norm
-
-
 def _three_point_slope(s1: np.ndarray, f1: np.ndarray, s2: np.ndarray, f2: np.ndarray) -> np.ndarray:
     """``f'(0)`` of the parabola through ``(s1, f1), (0, 0), (s2, f2)`` (second-order accurate)."""
     return (f1 * s2**2 - f2 * s1**2) / (s1 * s2 * (s2 - s1))
@@ -205,7 +198,7 @@ def curvature_hessian(
     state = np.asarray(state, dtype=float)
     z_c, d_c = state[..., 0], state[..., 1:]
     r_c = positions.mean(axis=-2)
-    x1, y1, g_c = _frenet(d_c)
+    x1, y1, g_c = level_curve_frame(d_c)
     offsets = positions - r_c[..., None, :]
     xi, eta = np.einsum("...ni,...i->...n", offsets, x1), np.einsum("...ni,...i->...n", offsets, y1)
     frame = np.stack([x1, y1], axis=-1)  # columns x1, y1: lab = frame @ Frenet

@@ -11,7 +11,7 @@ as ``(..., 2, 2)`` matrices or in the seed's 4-vector form ``vec(H) = [H11, H21,
 Example
 -------
 >>> import numpy as np
->>> from estimation.information_model import taylor_matrices
+>>> from mobisense.estimation.cooperative.information_model import taylor_matrices
 >>> C, D = taylor_matrices(np.array([[-1.0, 0.0], [1.0, 0.0], [0.0, 2.0], [0.0, -2.0]]))
 >>> C.shape, D.shape
 ((4, 3), (4, 4))

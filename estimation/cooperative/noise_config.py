@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation.kalman import transpose
-from ocp.config import NonNegativeFloat, PositiveFloat, StrictModel
+from mobisense.core.config import NonNegativeFloat, PositiveFloat, StrictModel
+from mobisense.estimation.kalman import transpose
 
 __all__ = ["CooperativeNoise", "NoiseConfig"]
 

@@ -19,13 +19,21 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
-from ocp.config import PositiveFloat, StrictModel
+from mobisense.core.config import PositiveFloat, StrictModel
+from mobisense.core.registry import Registry
 
-__all__ = ["Kernel", "KERNELS", "register_kernel", "SpatialNoise", "NoiseRealisation", "SpatialNoiseConfig"]
+__all__ = [
+    "Kernel",
+    "KERNELS",
+    "KernelName",
+    "register_kernel",
+    "SpatialNoise",
+    "NoiseRealisation",
+    "SpatialNoiseConfig",
+]
 
 
 class Kernel(ABC):
@@ -43,12 +51,14 @@ class Kernel(ABC):
 
 
 #: kernel name -> Kernel instance
-KERNELS: dict[str, Kernel] = {}
+KERNELS: Registry[Kernel] = Registry("spatial covariance kernel")
+#: the schema type of a field naming a kernel
+KernelName = KERNELS.choice()
 
 
 def register_kernel(cls: type[Kernel]) -> type[Kernel]:
     """Class decorator adding a kernel to :data:`KERNELS`."""
-    KERNELS[cls.name] = cls()
+    KERNELS.register(cls.name, cls())
     return cls
 
 
@@ -153,7 +163,7 @@ class SpatialNoise:
         if not (self.std >= 0 and self.length_scale > 0):
             raise ValueError(f"std must be >= 0 and length_scale > 0, got {self.std}, {self.length_scale}")
         if self.kernel not in KERNELS:
-            raise ValueError(f"kernel: unknown {self.kernel!r}; expected one of {sorted(KERNELS)}")
+            raise ValueError(f"kernel: {KERNELS.unknown(self.kernel)}")
 
     def covariance(self, r1: np.ndarray, r2: np.ndarray) -> np.ndarray:
         """Cross-covariance ``E[w(r1_i) w(r2_j)]``: ``(..., n, 2), (..., m, 2)`` → ``(..., n, m)``."""
@@ -211,7 +221,7 @@ class SpatialNoiseConfig(StrictModel):
 
     std: PositiveFloat
     length_scale: PositiveFloat
-    kernel: Literal["squared_exponential", "exponential", "matern32"] = "squared_exponential"
+    kernel: KernelName = "squared_exponential"
 
     def to_noise(self) -> SpatialNoise:
         """The corresponding :class:`SpatialNoise`."""

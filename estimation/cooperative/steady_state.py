@@ -5,10 +5,10 @@ covariance converges to the solution of the discrete algebraic Riccati equation 
 
     P(+)⁻¹ = (P(+) + M)⁻¹ + C' (D U D' + R)⁻¹ C .
 
-* :func:`steady_state` — any formation (N platforms at given offsets): python-control ``dare``;
-* :func:`cross_steady_state` — the cross (Prop. 3.14) in closed form, numerically;
-* :func:`cross_trace_function` — the same closed form as a CasADi function of ``(a, b)`` with symbolic
-  noise parameters, differentiated by CasADi (gradient, Hessian) for :mod:`estimation.formation_design`.
+* :func:`steady_state` — any formation (N platforms at given offsets): python-control ``dare``; *
+  :func:`cross_steady_state` — the cross (Prop. 3.14) in closed form, numerically; * :func:`cross_trace_function` — the
+  same closed form as a CasADi function of ``(a, b)`` with symbolic noise parameters, differentiated by CasADi
+  (gradient, Hessian) for :mod:`mobisense.estimation.cooperative.formation_design`.
 
 Each returns or feeds a :class:`SteadyState` with prior and posterior covariances and the constant gain
 ``K∞ = P∞(−) C' (C P∞(−) C' + D U D' + R)⁻¹ = P∞(+) C' (D U D' + R)⁻¹``. (The seed writes ``P∞`` in this
@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from estimation.information_model import cross_formation, taylor_matrices
-from estimation.noise_config import CooperativeNoise
+from mobisense.estimation.cooperative.information_model import cross_formation, taylor_matrices
+from mobisense.estimation.cooperative.noise_config import CooperativeNoise
 
 __all__ = [
     "SteadyState",

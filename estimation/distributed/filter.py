@@ -24,7 +24,7 @@ for quadratic fields and cost nothing. Measurements of both time levels are expa
 ``½ kron(δ, δ)'`` of ``D``, with ``δ = r_i − c^{k−1}``. The Hessian is fitted to the residual
 ``P − C x̂`` by least squares (eq. 18; the minimum-norm solution, since the two middle columns of ``D``
 are equal and ``D'D`` is always singular) or ridge regression (eq. 19). The covariance is propagated
-by the Joseph form of :func:`estimation.kalman.update`, which equals eq. 32 for the optimal gain. As in
+by the Joseph form of :func:`mobisense.estimation.kalman.update`, which equals eq. 32 for the optimal gain. As in
 the seed, the projection does not change the covariance, and the unconstrained filter (reported for
 comparison) runs beside the constrained one with the same gain.
 
@@ -50,11 +50,11 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from estimation.distributed_fvm import far_points, laplacian_stencil, pde_constraint, project
-from estimation.distributed_mesh import CellEdge, SensorMesh
-from estimation.information_model import transition_matrix, vec_to_hessian
-from estimation.kalman import predict, update
-from ocp.config import NonNegativeFloat, PositiveFloat, StrictModel
+from mobisense.core.config import NonNegativeFloat, PositiveFloat, StrictModel
+from mobisense.estimation.cooperative.information_model import transition_matrix, vec_to_hessian
+from mobisense.estimation.distributed.fvm import far_points, laplacian_stencil, pde_constraint, project
+from mobisense.estimation.distributed.mesh import CellEdge, SensorMesh
+from mobisense.estimation.kalman import predict, update
 
 __all__ = [
     "ValueGradientStd",

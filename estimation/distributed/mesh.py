@@ -12,7 +12,7 @@ vertex ``s`` to vertex ``s + 1`` with the cell on its left and the outward norma
 Example
 -------
 >>> import numpy as np
->>> from estimation.distributed_mesh import SensorMesh
+>>> from mobisense.estimation.distributed.mesh import SensorMesh
 >>> square = np.array([[0, 0], [1, 0], [2, 0], [0, 1], [1, 1], [2, 1]], dtype=float)
 >>> mesh = SensorMesh([[0, 1, 4, 3], [1, 2, 5, 4]], square)
 >>> mesh.neighbours(0), mesh.edges(0)[1]

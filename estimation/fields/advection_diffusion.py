@@ -28,7 +28,7 @@ from typing import Literal
 
 import numpy as np
 
-from estimation.fields import Field, register_field
+from mobisense.estimation.fields.base import Field, register_field
 
 __all__ = ["AdvectionDiffusionField"]
 
@@ -60,7 +60,7 @@ class AdvectionDiffusionField(Field):
     Examples
     --------
     >>> import numpy as np
-    >>> from estimation.fields import make_field
+    >>> from mobisense.estimation.fields.base import make_field
     >>> field = make_field("advection_diffusion", diffusivity=2.0, velocity=(0.5, 1.0), wavenumber=0.005)
     >>> float(field.value(np.array([100.0, 100.0]), 0.0))
     1.0

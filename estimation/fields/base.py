@@ -13,7 +13,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Field", "FIELDS", "register_field", "make_field"]
+from mobisense.core.registry import Registry
+
+__all__ = ["Field", "FIELDS", "register_field", "make_field", "level_curve_frame"]
 
 
 class Field(ABC):
@@ -36,21 +38,41 @@ class Field(ABC):
 
 
 #: field kind -> Field subclass
-FIELDS: dict[str, type[Field]] = {}
+FIELDS: Registry[type[Field]] = Registry("field kind")
 
 
 def register_field(cls: type[Field]) -> type[Field]:
     """Class decorator adding a :class:`Field` subclass to :data:`FIELDS` under ``cls.kind``."""
     if not cls.kind:
         raise TypeError(f"{cls.__name__} needs a non-empty 'kind' to be registered")
-    FIELDS[cls.kind] = cls
-    return cls
+    return FIELDS.register(cls.kind, cls)
 
 
 def make_field(kind: str, **params: Any) -> Field:
     """Instantiate the registered field ``kind`` with keyword parameters."""
-    try:
-        cls = FIELDS[kind]
-    except KeyError:
-        raise ValueError(f"unknown field kind {kind!r}; expected one of {sorted(FIELDS)}") from None
-    return cls(**params)
+    if kind not in FIELDS:
+        raise ValueError(FIELDS.unknown(kind))
+    return FIELDS[kind](**params)
+
+
+def level_curve_frame(gradient: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The frame of the level curve through a point, from the field's gradient there.
+
+    Parameters
+    ----------
+    gradient : ndarray, shape (..., 2)
+        ∇z at the point (field unit per length unit); must be non-zero.
+
+    Returns
+    -------
+    x1 : ndarray, shape (..., 2)
+        Unit tangent of the level curve, oriented so that ``x1 × y1`` points out of the page.
+    y1 : ndarray, shape (..., 2)
+        Unit normal ``∇z/‖∇z‖``.
+    norm : ndarray, shape (...)
+        ``‖∇z‖``.
+    """
+    norm = np.linalg.norm(gradient, axis=-1)
+    y1 = gradient / norm[..., None]
+    x1 = np.stack([y1[..., 1], -y1[..., 0]], axis=-1)
+    return x1, y1, norm

@@ -1,12 +1,14 @@
-"""Concrete smooth fields (SPEC §2.8) registered in :data:`estimation.fields.FIELDS`, and their YAML form.
+"""Concrete smooth fields (SPEC §2.8) and their YAML form.
+
+Each is registered in :data:`mobisense.estimation.fields.base.FIELDS`:
 
 * ``quadratic`` — ``z = z0 + g'(r − r0) + ½ (r − r0)' H (r − r0)``, the analytic test case;
 * ``two_charges`` — potential of two identical positive point charges (seed §VII, Fig. 3);
 * ``ocean_temperature`` — synthetic ocean-like temperature (°C over km): a meandering front, warm and
   cold eddies and a gentle meridional gradient, with the 13 °C isotherm crossing the domain (seed §VII,
   Figs. 4-6, whose Monterey Bay snapshot is not public);
-* ``gridded`` — a field read from a netCDF file (:mod:`estimation.gridded_field`);
-* ``advection_diffusion`` — SPEC §4, registered by :mod:`estimation.advection_diffusion` when present.
+* ``gridded`` — a field read from a netCDF file (:mod:`mobisense.estimation.fields.gridded`);
+* ``advection_diffusion`` — SPEC §4, registered by :mod:`mobisense.estimation.fields.advection_diffusion` when present.
 
 Derivatives are written by hand and tested against finite differences (``tests/test_estimation_fields.py``).
 In YAML a field is a flat mapping ``{kind: ocean_temperature, front_width: 5.0}`` validated by
@@ -24,8 +26,8 @@ from typing import Any
 import numpy as np
 from pydantic import ConfigDict, PrivateAttr, model_validator
 
-from estimation.fields import FIELDS, Field, make_field, register_field
-from ocp.config import InvalidValue, StrictModel
+from mobisense.core.config import InvalidValue, StrictModel
+from mobisense.estimation.fields.base import FIELDS, Field, make_field, register_field
 
 __all__ = ["QuadraticField", "TwoChargesField", "OceanTemperatureField", "FieldSpec", "grid_dataset", "load_fields"]
 
@@ -245,7 +247,7 @@ class OceanTemperatureField(Field):
 
 def load_fields() -> dict[str, type[Field]]:
     """Import every module that registers fields (optional ones only if present); return :data:`FIELDS`."""
-    for module in ("estimation.gridded_field", "estimation.advection_diffusion"):
+    for module in ("mobisense.estimation.fields.gridded", "mobisense.estimation.fields.advection_diffusion"):
         try:
             importlib.import_module(module)
         except ModuleNotFoundError as err:
@@ -299,7 +301,7 @@ class FieldSpec(StrictModel):
 def grid_dataset(field: Field, x: np.ndarray, y: np.ndarray, t: float = 0.0, name: str = "z", units: str = "") -> Any:
     """Sample ``field`` on the grid ``x × y`` as an ``xarray.Dataset`` with variable ``name(y, x)``.
 
-    The result can be written with :func:`ocp.files.write_netcdf` and read back as a ``gridded`` field.
+    The result can be written with :func:`mobisense.core.files.write_netcdf` and read back as a ``gridded`` field.
     """
     import xarray as xr
 

@@ -18,7 +18,7 @@ With no active pair, the merged estimate coasts on the model. Choices the seed l
   so a stale extrapolation never enters the merge (only sub-filters active now are merged);
 * the discrete process-noise covariance is ``G q G'`` with the ``G`` of eq. 40 (the seed's eq. 36 prints
   ``BᵀQB``, an OCR slip for ``B Q Bᵀ``);
-* predict/update are the shared kernels of :mod:`estimation.kalman` (Joseph-form update), batched over
+* predict/update are the shared kernels of :mod:`mobisense.estimation.kalman` (Joseph-form update), batched over
   the active sub-filters.
 """
 
@@ -29,13 +29,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation.kalman import predict, symmetrize, update
+from mobisense.core.registry import Registry
+from mobisense.estimation.kalman import predict, symmetrize, update
 
 __all__ = [
+    "C_POSITION",
     "random_walk_model",
     "merge_closest",
     "merge_information",
     "MERGES",
+    "MergeName",
     "SwitchingStep",
     "SwitchingKalmanFilter",
 ]
@@ -109,10 +112,11 @@ def merge_information(
 
 
 #: merge strategy name -> function(states, covariances, prior) -> (x, P, chosen index or −1)
-MERGES: dict[str, Callable[[np.ndarray, np.ndarray, np.ndarray | None], tuple[np.ndarray, np.ndarray, int]]] = {
-    "closest": merge_closest,
-    "information": merge_information,
-}
+MERGES: Registry[Callable[[np.ndarray, np.ndarray, np.ndarray | None], tuple[np.ndarray, np.ndarray, int]]] = Registry(
+    "merge strategy", {"closest": merge_closest, "information": merge_information}
+)
+#: the schema type of a field naming a merge strategy
+MergeName = MERGES.choice()
 
 
 @dataclass(frozen=True)
@@ -164,7 +168,7 @@ class SwitchingKalmanFilter:
         initial_velocity_std: float = 1.0,
     ) -> None:
         if merge not in MERGES:
-            raise ValueError(f"unknown merge strategy {merge!r}; expected one of {sorted(MERGES)}")
+            raise ValueError(MERGES.unknown(merge))
         self.A, self.Q = random_walk_model(sample_time, acceleration_std)
         self.merge = MERGES[merge]
         self.initial_velocity_std = float(initial_velocity_std)
@@ -187,7 +191,7 @@ class SwitchingKalmanFilter:
         active : ndarray of bool, shape (P,)
         positions : ndarray, shape (P, 2)
         position_covariances : ndarray, shape (P, 2, 2)
-            Pair measurements (see :class:`estimation.range_ring.PairMeasurements`).
+            Pair measurements (see :class:`mobisense.estimation.tracking.range_ring.PairMeasurements`).
 
         Returns
         -------

@@ -37,8 +37,8 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from estimation.distributed_mesh import SensorMesh
-from ocp.config import FiniteFloat, InvalidValue, NonNegativeFloat, PositiveFloat, StrictModel
+from mobisense.core.config import FiniteFloat, InvalidValue, NonNegativeFloat, PositiveFloat, StrictModel
+from mobisense.estimation.distributed.mesh import SensorMesh
 
 __all__ = [
     "FormationOptions",

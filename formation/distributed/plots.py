@@ -1,7 +1,7 @@
 """Figures of a distributed-filter simulation: cell-centre paths over level curves, estimates vs truth.
 
-Both functions take the ``xarray.Dataset`` of :func:`estimation.distributed_simulation.simulate` and
-return a matplotlib Figure (for :func:`ocp.files.write_figure` or a notebook).
+Both functions take the ``xarray.Dataset`` of :func:`mobisense.formation.distributed.simulation.simulate` and
+return a matplotlib Figure (for :func:`mobisense.core.files.write_figure` or a notebook).
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from estimation.fields import Field
+from mobisense.estimation.fields.base import Field
 
 __all__ = ["plot_paths", "plot_estimates"]
 

@@ -25,6 +25,8 @@ import warnings
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
+from mobisense.core.registry import Registry
+
 __all__ = [
     "RelativeMeasurement",
     "FormationReference",
@@ -138,23 +140,21 @@ class FormationControl(ABC):
 
 
 #: control name -> FormationControl subclass
-CONTROLS: dict[str, type[FormationControl]] = {}
+CONTROLS: Registry[type[FormationControl]] = Registry("control")
 
 
 def register_control(cls: type[FormationControl]) -> type[FormationControl]:
     """Class decorator adding a :class:`FormationControl` to :data:`CONTROLS` under ``cls.name``."""
     if not cls.name:
         raise TypeError(f"{cls.__name__} needs a non-empty 'name' to be registered")
-    CONTROLS[cls.name] = cls
-    return cls
+    return CONTROLS.register(cls.name, cls)
 
 
 def make_control(name: str) -> FormationControl:
     """Instantiate the registered control ``name``."""
-    try:
-        return CONTROLS[name]()
-    except KeyError:
-        raise ValueError(f"unknown control {name!r}; expected one of {sorted(CONTROLS)}") from None
+    if name not in CONTROLS:
+        raise ValueError(CONTROLS.unknown(name))
+    return CONTROLS[name]()
 
 
 @register_control

@@ -2,7 +2,7 @@
 
 * :func:`chord_window` — the furthest point back on a recorded path whose chord to the path's end keeps the
   area between path and chord (the tinted area of the seed's Fig. 13) below a tolerance; it defines the
-  dynamic formation parameters of :class:`~formation.leader_follower_references.PathReference`.
+  dynamic formation parameters of :class:`~mobisense.formation.leader_follower.references.PathReference`.
 * :func:`path_deviation` — the deviation of a follower from the path its predecessor has travelled (eq. 54).
 
 Paths are arrays ``(m, 2)`` of positions (m), oldest first.

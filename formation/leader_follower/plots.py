@@ -1,6 +1,8 @@
-"""Figures of a leader–follower result (the dataset of :func:`formation.leader_follower_runs.simulate_scenario`).
+"""Figures of a leader–follower result.
 
-Each function returns a matplotlib ``Figure`` (to be saved with :func:`ocp.files.write_figure`):
+The dataset is the one of :func:`mobisense.formation.leader_follower.runs.simulate_scenario`.
+
+Each function returns a matplotlib ``Figure`` (to be saved with :func:`mobisense.core.files.write_figure`):
 paths (seed Figs. 10, 14–15), ``d − d0`` and ``β − β0`` (Fig. 11), ``x_e, y_e`` (Figs. 12, 21), path
 deviation (eq. 54, Fig. 16), the formation parameters ``d0(t), β0(t)`` (Figs. 17–19) and the switching
 filter's active pairs.
@@ -13,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from ocp.files import write_figure
+from mobisense.core.files import write_figure
 
 __all__ = [
     "plot_paths",

@@ -1,7 +1,7 @@
 """Formation-parameter schedules ``d0(t), β0(t)`` for leader–follower controls (seed 001 §6.2, §8.3).
 
 A schedule is a small class registered in :data:`REFERENCES` and evaluated with
-:meth:`ReferenceSchedule.at`, which returns a :class:`~formation.leader_follower_controls.FormationReference`
+:meth:`ReferenceSchedule.at`, which returns a :class:`~mobisense.formation.leader_follower.controls.FormationReference`
 (``d0, β0`` and, when known, their rates — Control 3 needs them).
 
 * :class:`ConstantReference` — fixed ``d0, β0`` (Theorems 1 and 2).
@@ -18,9 +18,10 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
-from formation.leader_follower_controls import FormationReference
-from formation.leader_follower_paths import chord_window
-from formation.unicycle import wrap_angle
+from mobisense.core.registry import Registry
+from mobisense.formation.leader_follower.controls import FormationReference
+from mobisense.formation.leader_follower.paths import chord_window
+from mobisense.formation.leader_follower.unicycle import wrap_angle
 
 __all__ = [
     "ReferenceSchedule",
@@ -56,15 +57,14 @@ class ReferenceSchedule(ABC):
 
 
 #: reference kind -> ReferenceSchedule subclass
-REFERENCES: dict[str, type[ReferenceSchedule]] = {}
+REFERENCES: Registry[type[ReferenceSchedule]] = Registry("formation-parameter reference")
 
 
 def register_reference(cls: type[ReferenceSchedule]) -> type[ReferenceSchedule]:
     """Class decorator adding a :class:`ReferenceSchedule` to :data:`REFERENCES` under ``cls.kind``."""
     if not cls.kind:
         raise TypeError(f"{cls.__name__} needs a non-empty 'kind' to be registered")
-    REFERENCES[cls.kind] = cls
-    return cls
+    return REFERENCES.register(cls.kind, cls)
 
 
 @register_reference
@@ -165,7 +165,7 @@ class PathReference(ReferenceSchedule):
     The seed defines the parameters only in words ("steer toward a position on the path of R_{i−1} such that
     d0 is maximised while the area of Fig. 13 is below A_max"). Our reading: walk back along the
     predecessor's recorded path from its current position ``P_m`` to the furthest point ``P`` with area ≤
-    ``A_max`` and chord ≤ ``max_distance`` (see :func:`~formation.leader_follower_paths.chord_window`). A
+    ``A_max`` and chord ≤ ``max_distance`` (see :func:`~mobisense.formation.leader_follower.paths.chord_window`). A
     follower sitting at ``P`` and heading along the path's tangent there sees its predecessor at::
 
         d0 = ‖P_m − P‖,   β0 = angle(P_m − P) − tangent heading at P,

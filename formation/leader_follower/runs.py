@@ -1,28 +1,31 @@
 """From a validated scenario to simulated runs and their summary metrics (``mobisense simulate leader-follower``).
 
-:func:`build_problem` turns one run of a :class:`~formation.leader_follower_scenario.LeaderFollowerScenario`
-into a :class:`~formation.leader_follower_simulation.LeaderFollowerProblem`; :func:`simulate_scenario` runs
+:func:`build_problem` turns one run of a :class:`~mobisense.formation.leader_follower.scenario.LeaderFollowerScenario`
+into a :class:`~mobisense.formation.leader_follower.simulation.LeaderFollowerProblem`; :func:`simulate_scenario` runs
 them all in order (a run may take its constant ``d0`` from an earlier run's mean distance) and stacks the
-results along a ``run`` dimension; :func:`summarize` computes the metrics written to ``summary.json``.
+results along a ``run`` dimension; :func:`summarize` computes the metrics written to ``summary.json``;
+:func:`run_leader_follower` does all of it and returns a :class:`LeaderFollowerResult`.
 """
 
 from __future__ import annotations
 
 import math
+import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import xarray as xr
 
-from estimation.range_ring import RangeSensorRing
-from formation.leader_follower_controls import WARN_COS, make_control, warn_near_singular
-from formation.leader_follower_references import (
+from mobisense.estimation.tracking.range_ring import RangeSensorRing
+from mobisense.formation.leader_follower.controls import WARN_COS, make_control, warn_near_singular
+from mobisense.formation.leader_follower.references import (
     BearingRampReference,
     ConstantReference,
     PathReference,
     ReferenceSchedule,
 )
-from formation.leader_follower_scenario import (
+from mobisense.formation.leader_follower.scenario import (
     ConstantReferenceConfig,
     LeaderFollowerScenario,
     RampReferenceConfig,
@@ -30,10 +33,24 @@ from formation.leader_follower_scenario import (
     RingSensingConfig,
     SensingConfig,
 )
-from formation.leader_follower_sensing import RingSpec
-from formation.leader_follower_simulation import IntegrationSettings, LeaderFollowerProblem, LeaderMotion, simulate
+from mobisense.formation.leader_follower.sensing import RingSpec
+from mobisense.formation.leader_follower.simulation import (
+    IntegrationSettings,
+    LeaderFollowerProblem,
+    LeaderMotion,
+    simulate,
+)
+from mobisense.formation.simulation_result import SimulationResult
 
-__all__ = ["build_reference", "build_ring", "build_problem", "simulate_scenario", "summarize"]
+__all__ = [
+    "build_reference",
+    "build_ring",
+    "build_problem",
+    "simulate_scenario",
+    "summarize",
+    "LeaderFollowerResult",
+    "run_leader_follower",
+]
 
 
 def build_reference(config: ReferenceConfig, measured_distance: dict[str, float], duration: float) -> ReferenceSchedule:
@@ -188,3 +205,67 @@ def summarize(result: xr.Dataset) -> dict[str, Any]:
             "followers": per_follower,
         }
     return summary
+
+
+class LeaderFollowerResult(SimulationResult):
+    """Every run of a leader–follower scenario (dataset along ``run``), its metrics and figures."""
+
+    kind = "leader_follower"
+
+    def plot(self, folder: str | Path) -> list[Path]:
+        """``paths.png``, ``formation_errors.png``, ``reference_point_errors.png``, ``deviation.png`` (+ more)."""
+        from mobisense.formation.leader_follower.plots import save_figures
+
+        return save_figures(self.dataset, Path(folder))
+
+    def report(self, folder: Path) -> None:
+        """One line per run and follower, and where the files went."""
+        s = self.summary
+        print(f"{s['scenario']}: {s['followers']} follower(s), {s['wall_time_s']:.2f} s wall time")
+        for run, entry in s["runs"].items():
+            for follower, m in entry["followers"].items():
+                line = (
+                    f"  {run:>12} R{follower}: |xe|,|ye|(T) = {m['final_abs_xe']:.2e}, {m['final_abs_ye']:.2e} m; "
+                    f"max|β−β0| = {m['max_abs_bearing_error']:.3f} rad (monotone: {m['bearing_error_monotone']}); "
+                    f"mean dev = {m['mean_deviation']:.3g} m"
+                )
+                if "rms_position_error" in m and m["rms_position_error"] is not None:
+                    line += f"; RMS estimate error = {m['rms_position_error']:.3g} m"
+                print(line)
+        super().report(folder)
+
+
+def run_leader_follower(
+    scenario: LeaderFollowerScenario, seed: int | None = None, source: str | Path | None = None
+) -> LeaderFollowerResult:
+    """Simulate every run of ``scenario`` and compute its metrics.
+
+    Parameters
+    ----------
+    scenario : LeaderFollowerScenario
+    seed : int, optional
+        Overrides ``scenario.seed``.
+    source : str or Path, optional
+        The scenario file (recorded in the summary).
+
+    Raises
+    ------
+    FormationSingularityError
+        A control met its singular set.
+    RuntimeError
+        The integrator failed.
+    """
+    started = time.perf_counter()
+    result = simulate_scenario(scenario, seed=seed)
+    summary = {
+        "scenario": scenario.name,
+        "file": None if source is None else str(source),
+        "seed": scenario.seed if seed is None else seed,
+        "duration_s": scenario.duration,
+        "step_s": scenario.step,
+        "gain_per_s": scenario.gain,
+        "followers": len(scenario.followers),
+        "wall_time_s": time.perf_counter() - started,
+        "runs": summarize(result),
+    }
+    return LeaderFollowerResult(result, summary)

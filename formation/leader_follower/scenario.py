@@ -27,9 +27,10 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import AfterValidator, Field, field_validator, model_validator
 
-from estimation.range_ring import KHEPERA_MOUNT_ANGLES_DEG, KHEPERA_PAIRS
-from formation.leader_follower_controls import CONTROLS
-from ocp.config import FiniteFloat, InvalidValue, NonNegativeFloat, PositiveFloat, StrictModel
+from mobisense.core.config import FiniteFloat, InvalidValue, NonNegativeFloat, PositiveFloat, StrictModel
+from mobisense.estimation.tracking.range_ring import KHEPERA_MOUNT_ANGLES_DEG, KHEPERA_PAIRS
+from mobisense.estimation.tracking.switching_filter import MergeName
+from mobisense.formation.leader_follower.controls import CONTROLS
 
 __all__ = [
     "LeaderConfig",
@@ -140,7 +141,7 @@ class RingSensingConfig(StrictModel):
     field_of_view_deg: PositiveFloat = 100.0
     target_radius: NonNegativeFloat = 0.0
     pairs: list[list[int]] = Field(default_factory=lambda: [list(p) for p in KHEPERA_PAIRS])
-    merge: Literal["closest", "information"] = "closest"
+    merge: MergeName = "closest"
     initial_velocity_std: PositiveFloat = 1.0
 
     @model_validator(mode="after")
@@ -253,7 +254,7 @@ class LeaderFollowerScenario(StrictModel):
 
 def _check_ramp(reference: RampReferenceConfig, duration: float, where: str) -> None:
     """Reject a ramp whose ``β0(t)`` leaves (−π/2, π/2) or whose ``d0(t)`` reaches 0 within the run."""
-    from formation.leader_follower_references import BearingRampReference
+    from mobisense.formation.leader_follower.references import BearingRampReference
 
     schedule = BearingRampReference(
         reference.distance,

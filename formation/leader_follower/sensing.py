@@ -3,9 +3,9 @@
 Two sensing modes (``sensing: {mode: …}`` in scenario files), both returning a :class:`Sensed` record:
 
 * :class:`ExactSensing` — the true ``(d, β, γ, v_{i−1})`` (for analysis; the closed loop is then continuous);
-* :class:`RingSensing` — a :class:`~estimation.range_ring.RangeSensorRing` read at the sample instants,
-  fed to a :class:`~estimation.switching_kalman.SwitchingKalmanFilter` (seed Algorithm 7.1), whose estimate
-  gives ``d, β, φ_{i−1}, γ, v_{i−1}`` by eqs. 49–53 (:func:`relative_from_estimate`).
+* :class:`RingSensing` — a :class:`~mobisense.estimation.tracking.range_ring.RangeSensorRing` read at the sample
+  instants, fed to a :class:`~mobisense.estimation.tracking.switching_filter.SwitchingKalmanFilter` (seed
+  Algorithm 7.1), whose estimate gives ``d, β, φ_{i−1}, γ, v_{i−1}`` by eqs. 49–53 (:func:`relative_from_estimate`).
 """
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation.range_ring import RangeSensorRing
-from estimation.switching_kalman import SwitchingKalmanFilter
-from formation.leader_follower_controls import RelativeMeasurement
+from mobisense.estimation.tracking.range_ring import RangeSensorRing
+from mobisense.estimation.tracking.switching_filter import SwitchingKalmanFilter
+from mobisense.formation.leader_follower.controls import RelativeMeasurement
 
 __all__ = ["Sensed", "ExactSensing", "RingSensing", "RingSpec", "exact_measurement", "relative_from_estimate"]
 
@@ -149,7 +149,7 @@ class RingSpec:
     acceleration_std : float
         Random-walk process noise of the target model (m/s²).
     merge : str
-        Merge strategy (key of :data:`estimation.switching_kalman.MERGES`).
+        Merge strategy (key of :data:`mobisense.estimation.tracking.switching_filter.MERGES`).
     initial_velocity_std : float
         Prior velocity standard deviation at first detection (m/s).
     """

@@ -25,11 +25,11 @@ import numpy as np
 import xarray as xr
 from scipy.integrate import solve_ivp
 
-from formation.leader_follower_controls import FormationControl, FormationReference
-from formation.leader_follower_paths import path_deviation
-from formation.leader_follower_references import ReferenceSchedule
-from formation.leader_follower_sensing import ExactSensing, RingSpec, exact_measurement
-from formation.unicycle import reference_point_error, relative_state, unicycle_rates
+from mobisense.formation.leader_follower.controls import FormationControl, FormationReference
+from mobisense.formation.leader_follower.paths import path_deviation
+from mobisense.formation.leader_follower.references import ReferenceSchedule
+from mobisense.formation.leader_follower.sensing import ExactSensing, RingSpec, exact_measurement
+from mobisense.formation.leader_follower.unicycle import reference_point_error, relative_state, unicycle_rates
 
 __all__ = ["LeaderMotion", "IntegrationSettings", "LeaderFollowerProblem", "simulate"]
 
@@ -191,7 +191,7 @@ def simulate(problem: LeaderFollowerProblem, rng: np.random.Generator | None = N
 
     Raises
     ------
-    formation.leader_follower_controls.FormationSingularityError
+    mobisense.formation.leader_follower.controls.FormationSingularityError
         If a control reaches its singular set.
     RuntimeError
         If the integrator fails.

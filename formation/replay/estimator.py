@@ -1,6 +1,6 @@
 """The estimator in the replay loop: cooperative Kalman filter + Hessian source, and what the controller sees.
 
-:class:`ClosedLoopEstimator` wraps :class:`~estimation.cooperative_filter.CooperativeKalmanFilter`
+:class:`ClosedLoopEstimator` wraps :class:`~mobisense.estimation.cooperative.filter.CooperativeKalmanFilter`
 (SPEC §2.2) for one mission: at each sample it predicts to the new formation centre, asks its Hessian
 source for ``Ĥ_{c,k}`` (SPEC §2.5) and fuses the platforms' measurements. With spatially correlated
 noise ``w`` the measurement covariance is ``R_k = σ2² I + W(r_k)`` (the kernel at the platform
@@ -20,7 +20,7 @@ the prior is still vague) and ``smoothing`` β (``Ĥ ← Ĥ + β (Ĥ_raw − Ĥ)
 constant ``Δt/β``).
 
 :class:`WindowHessian` is the Hessian source for formations without the cross's geometry (a rotating
-pair): a joint quadratic fit (:func:`~estimation.hessian_estimation.least_squares_hessian`, six
+pair): a joint quadratic fit (:func:`~mobisense.estimation.cooperative.hessian.least_squares_hessian`, six
 unknowns) to all measurements of the last ``window`` samples, about their centroid.
 """
 
@@ -31,12 +31,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from estimation.cooperative_filter import CooperativeKalmanFilter
-from estimation.fields import Field
-from estimation.hessian_estimation import CurvatureHessian, LeastSquaresHessian, least_squares_hessian
-from estimation.information_model import formation_center, hessian_drift, transition_matrix
-from estimation.noise_config import CooperativeNoise
-from estimation.spatial_noise import SpatialNoise
+from mobisense.estimation.cooperative.filter import CooperativeKalmanFilter
+from mobisense.estimation.cooperative.hessian import CurvatureHessian, LeastSquaresHessian, least_squares_hessian
+from mobisense.estimation.cooperative.information_model import formation_center, hessian_drift, transition_matrix
+from mobisense.estimation.cooperative.noise_config import CooperativeNoise
+from mobisense.estimation.cooperative.spatial_noise import SpatialNoise
+from mobisense.estimation.fields.base import Field
 
 __all__ = ["TrueField", "WindowHessian", "ClosedLoopEstimator"]
 

@@ -2,8 +2,8 @@
 
 ``mobisense replay`` on a scenario naming a ``solution.nc`` (:class:`OcpReplayScenario`):
 
-1. **Control.** Every sensor is a Newtonian platform (:mod:`formation.platforms`) tracking its optimised
-   path with :class:`~formation.ocp_replay_reference.TrackingController` (feed-forward of the optimiser's
+1. **Control.** Every sensor is a Newtonian platform (:mod:`mobisense.formation.platforms`) tracking its optimised
+   path with :class:`~mobisense.formation.replay.reference.TrackingController` (feed-forward of the optimiser's
    ``u``), integrated by ``solve_ivp`` (DOP853) from the planned initial state, optionally offset.
 2. **Estimation.** Along the *flown* paths the actual Kalman filter of the problem's process runs at the
    sampling period ``Δt``, on ``runs`` independent realisations at once (batched; the covariance recursion
@@ -28,14 +28,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from pydantic import Field
 
-from estimation import kalman
-from formation.ocp_replay_reference import ReferenceTrajectory, TrackingController
-from formation.platforms import PlatformLimits, PlatformLimitsConfig, newton_rates
-from ocp.config import PositiveFloat, StrictModel, Vector2
+from mobisense.core.config import PositiveFloat, StrictModel, Vector2
+from mobisense.estimation import kalman
+from mobisense.formation.platforms import PlatformLimits, PlatformLimitsConfig, newton_rates
+from mobisense.formation.replay.reference import ReferenceTrajectory, TrackingController
 
 if TYPE_CHECKING:
-    from ocp.problem import Problem
-    from ocp.solution import Solution
+    from mobisense.ocp.problem import Problem
+    from mobisense.ocp.solution import Solution
 
 __all__ = [
     "TrackingGains",

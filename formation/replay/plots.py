@@ -1,4 +1,4 @@
-"""Figures and animation of a field replay (:mod:`formation.replay_results` dataset).
+"""Figures and animation of a field replay (:mod:`mobisense.formation.replay.results` dataset).
 
 ``paths.png`` (field contours, the tracked level, platform and centre paths, formation snapshots),
 ``z_estimate.png`` (estimate ± 2σ vs truth vs time), ``shape.png`` (a(t), b(t) and their desired values),
@@ -146,7 +146,7 @@ def _tracking(ds: Any, units: Any) -> Any:
 
 def save_figures(ds: Any, field: Any, scenario: Any, out: Path) -> list[Path]:
     """Write the figures into ``out``; return their paths."""
-    from ocp.files import write_figure
+    from mobisense.core.files import write_figure
 
     u = scenario.units
     figures = {
@@ -198,7 +198,7 @@ def save_animation(ds: Any, field: Any, scenario: Any, out: Path, max_frames: in
     tmp = out / f".partial-{name}"  # the encoders pick the container from the extension: keep it
     try:
         anim.save(tmp, writer=writer, dpi=90)
-        os.replace(tmp, out / name)  # atomic, as ocp.files
+        os.replace(tmp, out / name)  # atomic, as mobisense.core.files
     finally:
         plt.close(fig)
         tmp.unlink(missing_ok=True)

@@ -1,7 +1,7 @@
 """Optimised sensor trajectories as references to track (the OCP → control link of SPEC §2.8 / issue 5).
 
 * :func:`load_or_solve` — a ``solution.nc`` written by ``mobisense solve``, or, when the file does not
-  exist yet, the solution of the problem it came from, solved here by :func:`ocp.direct.solve_direct`
+  exist yet, the solution of the problem it came from, solved here by :func:`mobisense.ocp.direct.solver.solve_direct`
   (so shipped scenarios run on a fresh clone);
 * :class:`ReferenceTrajectory` — positions and velocities of the solution as a C¹ cubic Hermite
   spline through its state grid (``p`` with slopes ``v``: exact at every collocation point), and the
@@ -19,10 +19,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from formation.shape_control import FixedShapeController
+from mobisense.formation.shape_control import FixedShapeController
 
 if TYPE_CHECKING:
-    from ocp.solution import Solution
+    from mobisense.ocp.solution import Solution
 
 __all__ = ["load_or_solve", "ReferenceTrajectory", "TrackingController"]
 
@@ -43,15 +43,15 @@ def load_or_solve(solution_path: Path, problem_path: Path | None) -> tuple[Solut
     RuntimeError
         The solver did not reach ε = 1.
     """
-    from ocp.config import ConfigError
-    from ocp.solution import Solution
+    from mobisense.core.config import ConfigError
+    from mobisense.ocp.solution import Solution
 
     if solution_path.is_file():
         return Solution.load(solution_path), f"loaded {solution_path}"
     if problem_path is None:
         raise ConfigError(f"{solution_path}: file not found (give 'problem:' to solve it first)")
-    from ocp.direct import solve_direct
-    from ocp.problem import load_problem
+    from mobisense.ocp.direct.solver import solve_direct
+    from mobisense.ocp.problem import load_problem
 
     problem = load_problem(problem_path)  # ConfigError (one line) if invalid
     solution = solve_direct(problem)
@@ -92,7 +92,7 @@ class ReferenceTrajectory:
 
     @classmethod
     def from_solution(cls, solution: Solution) -> ReferenceTrajectory:
-        """The reference of a :class:`~ocp.solution.Solution`."""
+        """The reference of a :class:`~mobisense.ocp.solution.Solution`."""
         return cls(solution.t, solution.p, solution.v, solution.t_u, solution.u)
 
     def __call__(self, t: float | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

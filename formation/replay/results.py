@@ -1,4 +1,4 @@
-"""``result.nc`` and ``summary.json`` of a field replay (:mod:`formation.replay_simulation`).
+"""``result.nc`` and ``summary.json`` of a field replay (:mod:`mobisense.formation.replay.simulation`).
 
 Variables of the dataset (dimension ``time`` = the filter samples):
 
@@ -19,9 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from formation.level_curve import heading_error
-from formation.replay_simulation import CenterLevelCurve, ReplayRecord, ReplaySystem
-from formation.shape_control import shape_error
+from mobisense.formation.level_curve import heading_error
+from mobisense.formation.replay.simulation import CenterLevelCurve, ReplayRecord, ReplaySystem
+from mobisense.formation.shape_control import shape_error
 
 __all__ = ["replay_dataset", "replay_summary"]
 

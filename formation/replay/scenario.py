@@ -28,13 +28,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BeforeValidator, Field, SerializeAsAny, model_validator
 
-from estimation.field_library import FieldSpec
-from estimation.information_model import cross_formation
-from estimation.noise_config import NoiseConfig
-from estimation.spatial_noise import SpatialNoiseConfig
-from formation.level_curve import LEVEL_FUNCTIONS
-from formation.ocp_replay import TrackingGains
-from ocp.config import (
+from mobisense.core.config import (
     ConfigError,
     FiniteFloat,
     InvalidValue,
@@ -44,6 +38,12 @@ from ocp.config import (
     Vector2,
     parse_config,
 )
+from mobisense.estimation.cooperative.information_model import cross_formation
+from mobisense.estimation.cooperative.noise_config import NoiseConfig
+from mobisense.estimation.cooperative.spatial_noise import SpatialNoiseConfig
+from mobisense.estimation.fields.library import FieldSpec
+from mobisense.formation.level_curve import LEVEL_FUNCTIONS, LevelFunctionName
+from mobisense.formation.replay.plan import TrackingGains
 
 __all__ = [
     "InitialState",
@@ -92,7 +92,7 @@ class InitialState(StrictModel):
 
 
 class PlatformsConfig(StrictModel):
-    """Number of platforms, their limits (:mod:`formation.platforms`) and initial state."""
+    """Number of platforms, their limits (:mod:`mobisense.formation.platforms`) and initial state."""
 
     count: int = Field(ge=2, le=64)
     max_force: PositiveFloat | None = None
@@ -214,7 +214,7 @@ FORMATIONS: dict[str, type[StrictModel]] = {"cross": CrossFormation, "rigid": Ri
 class LevelFunctionConfig(StrictModel):
     """``f = dh/dz`` of eq. 48: ``linear`` (``gain (z − C)``) or ``reciprocal`` (``gain (1/C − 1/z)``)."""
 
-    kind: Literal["linear", "reciprocal"] = "linear"
+    kind: LevelFunctionName = "linear"
     gain: PositiveFloat = 1.0
 
 

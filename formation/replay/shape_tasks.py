@@ -6,12 +6,13 @@
   vectors ``q^d = g(φ) p^d`` move with φ; the feed-forward uses ``φ' = (r_c' × r_c'')/‖r_c'‖²``, giving
   ``q^d' = φ' J q^d`` and ``q^d'' ≈ −φ'² q^d`` (the ``φ''`` term is neglected: small for a centre on a
   smooth curve). With φ fixed this is the seed's constant-shape law.
-* :class:`RotatingShape` — :class:`~formation.shape_control.RotatingShapeController` with its frame
+* :class:`RotatingShape` — :class:`~mobisense.formation.shape_control.RotatingShapeController` with its frame
   angle ψ and rate Ω as two extra ODE states.
 
 :func:`cross_shape` resolves the cross's ``(a, b)``: given, designed for the filter's steady state
-(:func:`~estimation.formation_design.design_cross_formation`), read from a ``mobisense steady-state``
-``summary.json``, or adapted online (step 3A, :func:`~estimation.formation_design.adaptive_shape_step`).
+(:func:`~mobisense.estimation.cooperative.formation_design.design_cross_formation`), read from a ``mobisense
+steady-state`` ``summary.json``, or adapted online (step 3A,
+:func:`~mobisense.estimation.cooperative.formation_design.adaptive_shape_step`).
 """
 
 from __future__ import annotations
@@ -22,12 +23,12 @@ from typing import Any
 
 import numpy as np
 
-from estimation.information_model import cross_formation, rotation
-from estimation.noise_config import NoiseConfig
-from formation.jacobi import JacobiTransform
-from formation.replay_scenario import CrossFormation, RigidFormation, RotatingFormation, ShapeConfig
-from formation.shape_control import FixedShapeController, RotatingShapeController, perp
-from ocp.config import ConfigError
+from mobisense.core.config import ConfigError
+from mobisense.estimation.cooperative.information_model import cross_formation, rotation
+from mobisense.estimation.cooperative.noise_config import NoiseConfig
+from mobisense.formation.jacobi import JacobiTransform
+from mobisense.formation.replay.scenario import CrossFormation, RigidFormation, RotatingFormation, ShapeConfig
+from mobisense.formation.shape_control import FixedShapeController, RotatingShapeController, perp
 
 __all__ = ["OrientedShape", "RotatingShape", "cross_shape", "build_shape_task"]
 
@@ -187,7 +188,7 @@ def cross_shape(
     For ``adaptive`` the start is the steady-state design within the same bounds (then step 3A takes
     over at the first sample).
     """
-    from estimation.formation_design import design_cross_formation
+    from mobisense.estimation.cooperative.formation_design import design_cross_formation
 
     if shape.a is not None and shape.b is not None:
         return shape.a, shape.b, {"source": "given"}

@@ -3,13 +3,13 @@
 State of the ODE: platform positions and velocities ``(N, 2)`` each, plus the extra states of the shape
 task (``ψ, Ω`` of a rotating formation). Its right-hand side, at any time t:
 
-1. centre and Jacobi vectors of positions and velocities (:class:`~formation.jacobi.JacobiTransform`);
+1. centre and Jacobi vectors of positions and velocities (:class:`~mobisense.formation.jacobi.JacobiTransform`);
 2. field value and derivatives at the centre — the filter's Taylor prediction from the last sample, or
-   the true field (:mod:`formation.replay_estimation`);
+   the true field (:mod:`mobisense.formation.replay.estimator`);
 3. centre acceleration ``a_c``: level-curve tracking (eq. 48 + speed control) or tracking of an
-   optimised reference (:mod:`formation.ocp_replay_reference`);
-4. shape forces ``u_j`` (:mod:`formation.replay_formation`);
-5. platform forces ``f = [N a_c, u] Ψ^T`` (eq. 40 inverted), limited (:mod:`formation.platforms`).
+   optimised reference (:mod:`mobisense.formation.replay.reference`);
+4. shape forces ``u_j`` (:mod:`mobisense.formation.replay.shape_tasks`);
+5. platform forces ``f = [N a_c, u] Ψ^T`` (eq. 40 inverted), limited (:mod:`mobisense.formation.platforms`).
 
 ``solve_ivp`` (RK45, ``rtol`` 1e-7) integrates between consecutive filter samples, the controllers being
 continuous; at each sample every platform measures ``p_i = z(r_i) + w(r_i) + n_i`` (``w`` one sample
@@ -26,16 +26,16 @@ from typing import Any
 
 import numpy as np
 
-from estimation.information_model import formation_center, rotation
-from formation.jacobi import JacobiTransform
-from formation.level_curve import LEVEL_FUNCTIONS, LevelCurveController
-from formation.ocp_replay import resolve
-from formation.ocp_replay_reference import ReferenceTrajectory, TrackingController, load_or_solve
-from formation.platforms import PlatformLimits, newton_rates
-from formation.replay_estimation import ClosedLoopEstimator, TrueField
-from formation.replay_formation import build_shape_task
-from formation.replay_scenario import FieldReplayScenario, LevelCurveMotion, ReferenceMotion
-from ocp.config import ConfigError
+from mobisense.core.config import ConfigError
+from mobisense.estimation.cooperative.information_model import formation_center, rotation
+from mobisense.formation.jacobi import JacobiTransform
+from mobisense.formation.level_curve import LEVEL_FUNCTIONS, LevelCurveController
+from mobisense.formation.platforms import PlatformLimits, newton_rates
+from mobisense.formation.replay.estimator import ClosedLoopEstimator, TrueField
+from mobisense.formation.replay.plan import resolve
+from mobisense.formation.replay.reference import ReferenceTrajectory, TrackingController, load_or_solve
+from mobisense.formation.replay.scenario import FieldReplayScenario, LevelCurveMotion, ReferenceMotion
+from mobisense.formation.replay.shape_tasks import build_shape_task
 
 __all__ = ["ReplayError", "ReplaySystem", "ReplayRecord", "build_system", "simulate"]
 
@@ -251,8 +251,8 @@ def _adapt_shape(system: ReplaySystem, y: np.ndarray, k: int) -> None:
     The formation cannot jump, so the shape chosen now serves the next measurement, whose prior is
     predicted as ``P_k(+) + M`` (``A ≈ I`` over one step along a level curve, SPEC §2.4).
     """
-    from estimation.formation_design import adaptive_shape_step
-    from estimation.information_model import cross_formation
+    from mobisense.estimation.cooperative.formation_design import adaptive_shape_step
+    from mobisense.estimation.cooperative.information_model import cross_formation
 
     shape_cfg = getattr(system.scenario.formation, "shape", None)
     adaptive = None if shape_cfg is None else shape_cfg.adaptive

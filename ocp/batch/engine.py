@@ -1,11 +1,11 @@
 """Distributed solving on dask.distributed: sweeps and multi-start, resumable and fault-tolerant.
 
-Tasks carry plain data (problem dicts, numpy arrays), never CasADi objects; each worker process builds
-and caches the transcription of a problem structure (:func:`ocp.direct.transcription_for`) and re-solves
-it with new parameters. The client keeps at most ``2 × workers`` tasks in flight so that each new task
-can be warm-started from the nearest finished task of the same structure (primal–dual point re-scaled by
-:meth:`DirectCollocation.transfer`). A task that raises, or whose worker dies more often than dask
-retries, becomes a row with ``status = "error"``; nothing stops the sweep.
+Tasks carry plain data (problem dicts, numpy arrays), never CasADi objects; each worker process builds and caches the
+transcription of a problem structure (:func:`mobisense.ocp.direct.solver.transcription_for`) and re-solves it with new
+parameters. The client keeps at most ``2 × workers`` tasks in flight so that each new task can be warm-started from the
+nearest finished task of the same structure (primal–dual point re-scaled by :meth:`DirectCollocation.transfer`). A task
+that raises, or whose worker dies more often than dask retries, becomes a row with ``status = "error"``; nothing stops
+the sweep.
 """
 
 from __future__ import annotations
@@ -17,47 +17,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["solve_payload", "open_client", "run_tasks"]
+from mobisense.ocp.batch.worker import solve_task
 
-
-def solve_payload(payload: dict[str, Any]) -> dict[str, Any]:
-    """Worker side: solve one task. ``payload`` = {problem, seed (NLP point or None), guess_seed (int|None)}."""
-    from ocp.direct import _cached_transcription, solve_direct
-    from ocp.problem import Problem
-
-    t0 = time.perf_counter()
-    hits = _cached_transcription.cache_info().hits
-    problem = Problem.from_dict(payload["problem"], source="task")
-    guess = None
-    if payload.get("guess_seed") is not None:
-        from ocp.multistart import random_guess
-
-        guess = random_guess(problem, payload["guess_seed"])
-    solution = solve_direct(problem, init=payload.get("seed"), guess=guess)
-    cached = _cached_transcription.cache_info().hits > hits
-    row = {
-        "status": solution.status,
-        "cost": solution.cost,
-        "terminal_cost": solution.terminal_cost,
-        "running_cost": solution.running_cost,
-        "iterations": int(sum(s.iterations for s in solution.homotopy)),
-        "time_s": time.perf_counter() - t0,
-        "solve_time_s": float(sum(s.time_s for s in solution.homotopy)),
-        "worker": _worker_name(),
-        "error": "" if solution.success else solution.message,
-        "start": solution.stats.get("start", "continuation from coasting"),
-        "transcription_cached": cached,
-    }
-    return {"row": row, "dataset": solution.to_dataset(), "nlp": solution.nlp if solution.success else None}
-
-
-def _worker_name() -> str:
-    try:
-        from dask.distributed import get_worker
-
-        return str(get_worker().name)
-    except (ImportError, ValueError):
-        return "local"
+__all__ = ["open_client", "run_tasks", "nearest_seed"]
 
 
 @contextlib.contextmanager
@@ -85,7 +47,8 @@ def open_client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
         yield client
 
 
-def _nearest(seeds: list[tuple[Any, np.ndarray, dict]], key: Any, point: np.ndarray) -> dict | None:
+def nearest_seed(seeds: list[tuple[Any, np.ndarray, dict]], key: Any, point: np.ndarray) -> dict | None:
+    """The NLP point of the finished task nearest to ``point`` among ``seeds`` of structure ``key`` (or None)."""
     candidates = [(np.linalg.norm(coords - point), nlp) for k, coords, nlp in seeds if k == key]
     return min(candidates, key=lambda c: c[0])[1] if candidates else None
 
@@ -128,8 +91,8 @@ def run_tasks(
             return False
         payload = dict(payloads[i])
         if warm_start and payload.get("guess_seed") is None:
-            payload["seed"] = _nearest(seeds, keys[i], coords[i])
-        future = client.submit(solve_payload, payload, pure=False, key=f"task-{i}-{time.time_ns()}")
+            payload["seed"] = nearest_seed(seeds, keys[i], coords[i])
+        future = client.submit(solve_task, payload, pure=False, key=f"task-{i}-{time.time_ns()}")
         futures[future] = i
         queue.add(future)
         return True

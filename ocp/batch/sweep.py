@@ -22,10 +22,10 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field, field_validator
 
-from ocp.config import ConfigError, StrictModel, load_config
-from ocp.keypath import get_path, parse_key_path, set_path
-from ocp.model import Structure
-from ocp.problem import Problem, load_problem
+from mobisense.core.config import ConfigError, StrictModel, load_config
+from mobisense.core.keypath import get_path, parse_key_path, set_path
+from mobisense.ocp.model import Structure
+from mobisense.ocp.problem import Problem, load_problem
 
 __all__ = ["SweepSpec", "SweepTask", "load_sweep", "expand_sweep"]
 

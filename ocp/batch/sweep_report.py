@@ -10,7 +10,8 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
-from ocp.sweep import SweepSpec, SweepTask
+from mobisense.ocp.batch.sweep import SweepSpec, SweepTask
+from mobisense.ocp.solution import StartKind
 
 __all__ = ["SweepProgress", "sweep_summary"]
 
@@ -78,8 +79,8 @@ def sweep_summary(spec: SweepSpec, tasks: list[SweepTask], rows: list[dict[str, 
     statuses = [r["status"] for r in rows]
     solved = [r for r in rows if r["status"] == "solved"]
     best = min(solved, key=lambda r: r["cost"]) if solved else None
-    warm = [r for r in solved if str(r.get("start", "")) == "warm start from init"]
-    cold = [r for r in solved if str(r.get("start", "")).startswith(("continuation", "warm start from init failed"))]
+    warm = [r for r in solved if r.get("start") == StartKind.WARM.value]
+    cold = [r for r in solved if r.get("start") in (StartKind.CONTINUATION.value, StartKind.WARM_FAILED.value)]
     return {
         "mode": spec.mode,
         "vary": list(spec.vary),

@@ -2,7 +2,7 @@
 
 ``solve_direct(problem)`` builds (or reuses) the transcription for the problem's structure and grid,
 starts from the ε → 0 limit (coasting sensors, Σ from the Riccati IVP), continues in ε with primal and
-dual warm starts, and returns a :class:`~ocp.solution.Solution` — complete, or up to the last ε
+dual warm starts, and returns a :class:`~mobisense.ocp.solution.Solution` — complete, or up to the last ε
 solved with ``status="failed"`` and the worst-violated constraint named in problem terms.
 """
 
@@ -10,76 +10,60 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from functools import lru_cache
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from ocp.homotopy import run_continuation
-from ocp.model import Structure, vec_to_sym
-from ocp.problem import Problem
-from ocp.simulate import Trajectory, coast
-from ocp.solution import HomotopyStep, Solution
-from ocp.transcription import DirectCollocation, NLPResult
+from mobisense.ocp.direct.guesses import initial_guess, state_grid
+from mobisense.ocp.direct.transcription import DirectCollocation, NLPResult, transcription_for
+from mobisense.ocp.homotopy import run_continuation
+from mobisense.ocp.problem import Problem
+from mobisense.ocp.simulate import Trajectory, coast
+from mobisense.ocp.solution import HomotopyStep, Solution, SolveStatus, StartKind
 
-__all__ = ["solve_direct", "transcription_for", "coasting_baseline"]
-
-
-@lru_cache(maxsize=16)
-def _cached_transcription(
-    structure: Structure,
-    scheme: str,
-    degree: int,
-    intervals: int,
-    tolerance: float,
-    max_iterations: int,
-    time_limit: float | None = None,
-) -> DirectCollocation:
-    extra = {} if time_limit is None else {"max_wall_time": time_limit}
-    return DirectCollocation(
-        structure, scheme, degree, intervals, ipopt_options=extra, tolerance=tolerance, max_iterations=max_iterations
-    )
+__all__ = ["solve_direct"]
 
 
-def transcription_for(problem: Problem) -> DirectCollocation:
-    """The (cached) transcription for ``problem``'s structure and solver options."""
-    opts = problem.solver
-    c = opts.collocation
-    return _cached_transcription(
-        Structure.of(problem), c.scheme, c.degree, c.intervals, opts.tolerance, opts.max_iterations, opts.time_limit
-    )
+@dataclass
+class _Continuation:
+    """The state of one ε-continuation: the accepted primal–dual point, every step, the accepted path."""
 
+    tr: DirectCollocation
+    values: dict[str, Any]
+    w: np.ndarray
+    progress: Callable[[HomotopyStep], None] | None = None
+    lam_w: np.ndarray | None = None
+    lam_g: np.ndarray | None = None
+    result: NLPResult | None = None  # the last accepted result
+    eps: float = 0.0  # the last accepted ε
+    failed: NLPResult | None = None  # the last failed result
+    steps: list[HomotopyStep] = field(default_factory=list)
+    path: list[tuple[float, np.ndarray]] = field(default_factory=list)
 
-def _state_grid(tr: DirectCollocation, t0: float, tf: float) -> tuple[np.ndarray, np.ndarray]:
-    """Merged state time grid (interval starts and collocation nodes, no duplicates) and its sort order."""
-    starts, nodes = tr.times(t0, tf)
-    t_all = np.concatenate([starts, nodes.ravel()])
-    order = np.argsort(t_all, kind="stable")
-    keep = np.concatenate([[True], np.diff(t_all[order]) > 1e-12 * max(1.0, abs(tf - t0))])
-    return t_all[order][keep], order[keep]
+    def parameters(self, eps: float) -> np.ndarray:
+        """The NLP parameter vector at ``eps``."""
+        return self.tr.layout.pack({**self.values, "eps": eps})
 
+    def attempt(self, eps: float) -> bool:
+        """Solve at ``eps`` from the accepted point; accept it if Ipopt converged."""
+        P = self.parameters(eps)
+        result = self.tr.solve(P, self.w, self.lam_w, self.lam_g)
+        phi, running, _ = (float(v) for v in self.tr.cost_terms(result.w, P))
+        step = HomotopyStep(eps, phi + running / eps, result.iterations, result.status, result.time_s, result.success)
+        self.steps.append(step)
+        if self.progress is not None:
+            self.progress(step)
+        if result.success:
+            self.w, self.lam_w, self.lam_g, self.result, self.eps = result.w, result.lam_w, result.lam_g, result, eps
+            self.path.append((eps, result.w))
+        else:
+            self.failed = result
+        return result.success
 
-def coasting_baseline(problem: Problem, t_eval: np.ndarray, tr: DirectCollocation | None = None) -> Trajectory:
-    """The ε → 0 solution: sensors coast (u ≡ 0), Σ from the Riccati IVP — the classical Kalman filter."""
-    tr = tr or transcription_for(problem)
-    P = tr.layout.pack(tr.layout.values(problem))
-    return coast(tr.model, P, t_eval)
-
-
-def _initial_guess(
-    tr: DirectCollocation, trajectory: Trajectory, P: np.ndarray, u: np.ndarray | None = None
-) -> np.ndarray:
-    """Decision vector of a trajectory sampled on the state grid (every start and node) and controls ``u``.
-
-    ``u`` has shape (K, d, nu) (controls at the collocation nodes); ``None`` means coasting (u = 0).
-    """
-    K, d = tr.intervals, tr.colloc.degree
-    starts, nodes = tr.times(trajectory.t[0], trajectory.t[-1])
-    t_all = np.concatenate([starts, nodes.ravel()])
-    tol = 1e-9 * max(1.0, abs(trajectory.t[-1] - trajectory.t[0]))
-    x_all = trajectory.x[np.clip(np.searchsorted(trajectory.t, t_all - tol), 0, len(trajectory.t) - 1)]
-    u = np.zeros((K, d, tr.structure.nu)) if u is None else u
-    return tr.pack(x_all[: K + 1], x_all[K + 1 :].reshape(K, d, -1), u, P)
+    def restart(self, w: np.ndarray, lam_w: np.ndarray | None = None, lam_g: np.ndarray | None = None) -> None:
+        """Continue from another primal (and dual) point."""
+        self.w, self.lam_w, self.lam_g = w, lam_w, lam_g
 
 
 def _worst_violation(tr: DirectCollocation, result: NLPResult, problem: Problem) -> dict[str, Any]:
@@ -124,149 +108,105 @@ def solve_direct(
     t_start = time.perf_counter()
     tr = transcription or transcription_for(problem)
     t0, tf = problem.horizon.t0, problem.horizon.tf
-    layout = tr.layout
-    values = layout.values(problem)
-    t_grid, order = _state_grid(tr, t0, tf)
-    coasting = coast(tr.model, layout.pack(values), t_grid)
+    values = tr.layout.values(problem)
+    t_grid, order = state_grid(tr, t0, tf)
+    coasting = coast(tr.model, tr.layout.pack(values), t_grid)
     values["cost_scale"] = max(abs(coasting.cost), 1e-8)
-    w0 = _initial_guess(tr, coasting, layout.pack(values))
-
-    state: dict[str, Any] = {"w": w0, "lam_w": None, "lam_g": None, "result": None, "eps": 0.0, "failed": None}
-    steps: list[HomotopyStep] = []
-    path: list[tuple[float, np.ndarray]] = []
-
-    def attempt(eps: float) -> bool:
-        P = layout.pack({**values, "eps": eps})
-        result = tr.solve(P, state["w"], state["lam_w"], state["lam_g"])
-        phi, running, _ = (float(v) for v in tr.cost_terms(result.w, P))
-        step = HomotopyStep(eps, phi + running / eps, result.iterations, result.status, result.time_s, result.success)
-        steps.append(step)
-        if progress is not None:
-            progress(step)
-        if result.success:
-            state.update(w=result.w, lam_w=result.lam_w, lam_g=result.lam_g, result=result, eps=eps)
-            path.append((eps, result.w))
-        else:
-            state["failed"] = (result, P)
-        return result.success
+    w0 = initial_guess(tr, coasting, tr.layout.pack(values))
+    run = _Continuation(tr, values, w0, progress)
 
     stats: dict[str, Any] = {"build_time_s": tr.build_time_s, "nlp_variables": tr.nw, "nlp_constraints": tr.ng}
     eps_reached = 0.0
     if init is not None:
-        stats["start"] = _start_from_solution(init, tr, layout.pack({**values, "eps": 1.0}), state)
-        if stats["start"] == "warm start from init":
-            eps_reached = 1.0 if attempt(1.0) else 0.0
+        start = _start_from_solution(init, run)
+        stats["start"] = start
+        if start is StartKind.WARM:
+            eps_reached = 1.0 if run.attempt(1.0) else 0.0
             if eps_reached < 1.0:
-                stats["start"] = "warm start from init failed; continuation from coasting"
-                state.update(w=w0, lam_w=None, lam_g=None)
+                stats["start"] = StartKind.WARM_FAILED
+                run.restart(w0)
     elif guess is not None:
-        stats["start"] = "initial guess, ε = 1 directly"
-        state["w"] = np.asarray(guess, float)
-        eps_reached = 1.0 if attempt(1.0) else 0.0
+        stats["start"] = StartKind.GUESS
+        run.restart(np.asarray(guess, float))
+        eps_reached = 1.0 if run.attempt(1.0) else 0.0
     if eps_reached < 1.0 and guess is None:
-        eps_reached = run_continuation(attempt, problem.solver.homotopy)
+        eps_reached = run_continuation(run.attempt, problem.solver.homotopy)
     solved = eps_reached == 1.0
     message = "converged at ε = 1"
-    if not solved:
-        failed_result, _ = state["failed"]
-        worst = _worst_violation(tr, failed_result, problem)
+    if not solved and run.failed is not None:
+        worst = _worst_violation(tr, run.failed, problem)
         stats["worst_violation"] = worst
         message = (
-            f"Ipopt returned {failed_result.status} at ε = {steps[-1].eps:g}; last ε solved = {eps_reached:g}; "
+            f"Ipopt returned {run.failed.status} at ε = {run.steps[-1].eps:g}; last ε solved = {eps_reached:g}; "
             f"worst-violated constraint: {worst['constraint']} at t = {worst['time']:.4g} "
             f"(violation {worst['violation']:.3g})"
         )
     stats["total_time_s"] = time.perf_counter() - t_start
-    return _assemble(problem, tr, values, state, steps, path, coasting, t_grid, order, solved, message, stats)
+    return _assemble(problem, run, coasting, order, solved, message, stats)
 
 
-def _start_from_solution(
-    init: Solution | dict[str, Any], tr: DirectCollocation, P: np.ndarray, state: dict[str, Any]
-) -> str:
-    """Load ``init``'s primal–dual point into ``state`` if its NLP has the same layout; say what happened."""
+def _start_from_solution(init: Solution | dict[str, Any], run: _Continuation) -> StartKind:
+    """Load ``init``'s primal–dual point into ``run`` if its NLP has the same layout; say what happened."""
     nlp = init.nlp if isinstance(init, Solution) else init
     if nlp is None or (isinstance(init, Solution) and init.eps != 1.0):
-        return "init ignored: it carries no converged ε = 1 NLP point"
-    if nlp["signature"] != repr(tr.signature):
-        return "init ignored: different structure or grid"
-    w, lam_w, lam_g = tr.transfer(nlp["w"], nlp["lam_w"], nlp["lam_g"], nlp["P"], P)
-    state.update(w=w, lam_w=lam_w, lam_g=lam_g)
-    return "warm start from init"
+        return StartKind.INIT_WITHOUT_POINT
+    if nlp["signature"] != repr(run.tr.signature):
+        return StartKind.INIT_OTHER_LAYOUT
+    w, lam_w, lam_g = run.tr.transfer(nlp["w"], nlp["lam_w"], nlp["lam_g"], nlp["P"], run.parameters(1.0))
+    run.restart(w, lam_w, lam_g)
+    return StartKind.WARM
 
 
 def _assemble(
     problem: Problem,
-    tr: DirectCollocation,
-    values: dict[str, Any],
-    state: dict[str, Any],
-    steps: list[HomotopyStep],
-    path: list[tuple[float, np.ndarray]],
+    run: _Continuation,
     coasting: Trajectory,
-    t_grid: np.ndarray,
     order: np.ndarray,
     solved: bool,
     message: str,
     stats: dict[str, Any],
 ) -> Solution:
-    s = tr.structure
-    n, N = s.n, s.N
-    eps = state["eps"]
-    P = tr.layout.pack({**values, "eps": max(eps, 1e-300)})
-    P1 = tr.layout.pack({**values, "eps": 1.0})
+    """The Solution of a continuation: the accepted point (or the coasting guess), costates, the ε path."""
+    tr = run.tr
+    P = run.parameters(max(run.eps, 1e-300))
 
     def on_grid(w: np.ndarray) -> np.ndarray:
         parts = tr.unpack(w, P)
-        x_all = np.concatenate([parts["xs"], parts["xc"].reshape(-1, s.nx)])
-        return x_all[order]
+        return np.concatenate([parts["xs"], parts["xc"].reshape(-1, tr.structure.nx)])[order]
 
-    x = on_grid(state["w"])
-    parts = tr.unpack(state["w"], P)
     _, nodes = tr.times(problem.horizon.t0, problem.horizon.tf)
-    phi, running, energy = (float(v) for v in tr.cost_terms(state["w"], P1))
-    solution = Solution(
-        problem=problem,
-        method="direct",
-        status="solved" if solved else "failed",
-        message=message,
-        eps=eps,
-        t=t_grid,
-        Sigma=vec_to_sym(x[:, : s.n_sigma], n),
-        p=x[:, s.n_sigma : s.n_sigma + 2 * N].reshape(-1, N, 2),
-        v=x[:, s.n_sigma + 2 * N :].reshape(-1, N, 2),
+    costs = tuple(float(v) for v in tr.cost_terms(run.w, run.parameters(1.0)))
+    lam = None if run.result is None else tr.costates(run.result, P)
+    solution = Solution.from_states(
+        problem,
+        "direct",
+        SolveStatus.SOLVED if solved else SolveStatus.FAILED,
+        message,
+        run.eps,
+        t=coasting.t,
+        x=on_grid(run.w),
         t_u=nodes.ravel(),
-        u=parts["u"].reshape(-1, N, 2),
-        terminal_cost=phi,
-        running_cost=running,
-        control_energy=energy,
-        homotopy=steps,
+        u=tr.unpack(run.w, P)["u"].reshape(nodes.size, -1),
+        costs=costs,  # type: ignore[arg-type]
+        t_costate=np.concatenate([[problem.horizon.t0], nodes.ravel()]),
+        lam=lam,
+        path_eps=np.array([e for e, _ in run.path]) if run.path else None,
+        path_x=np.stack([on_grid(w) for _, w in run.path]) if run.path else None,
+        homotopy=run.steps,
         baseline={
             "cost": coasting.cost,
             "terminal_cost": coasting.terminal_cost,
             "running_cost": coasting.running_cost,
         },
         stats=stats,
+        collocation=(tr.colloc.scheme, tr.colloc.degree, tr.intervals),
     )
-    if state["result"] is not None:
-        result = state["result"]
+    if run.result is not None:
         solution.nlp = {
-            "w": result.w,
-            "lam_w": result.lam_w,
-            "lam_g": result.lam_g,
+            "w": run.result.w,
+            "lam_w": run.result.lam_w,
+            "lam_g": run.result.lam_g,
             "P": P,
             "signature": repr(tr.signature),
         }
-        lam = tr.costates(result, P)
-        lam_sigma = lam[:, : s.n_sigma].copy()
-        Lam = vec_to_sym(lam_sigma, n)
-        off = ~np.eye(n, dtype=bool)
-        Lam[:, off] *= 0.5  # off-diagonal σ_ij stands for Σ_ij and Σ_ji: λ_σij = 2 Λ_ij
-        solution.t_costate = np.concatenate([[problem.horizon.t0], nodes.ravel()])
-        solution.Lam = Lam
-        solution.lam_p = lam[:, s.n_sigma : s.n_sigma + 2 * N].reshape(-1, N, 2)
-        solution.lam_v = lam[:, s.n_sigma + 2 * N :].reshape(-1, N, 2)
-    if path:
-        grids = [on_grid(w) for _, w in path]
-        solution.path_eps = np.array([e for e, _ in path])
-        solution.path_p = np.stack([g[:, s.n_sigma : s.n_sigma + 2 * N].reshape(-1, N, 2) for g in grids])
-        solution.path_Sigma = np.stack([vec_to_sym(g[:, : s.n_sigma], n) for g in grids])
     return solution

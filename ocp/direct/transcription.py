@@ -6,7 +6,7 @@ Decision vector, interval by interval (scaled variables, O(1)):
 Constraints: collocation equations (d per interval), continuity ``x_{k+1} = x_end(k)``, the initial
 state, fixed terminal states, control-norm bounds. Objective: the cost multiplied by ε,
 ``ε Tr[MΣ(tf)] + ∫ L`` (same minimiser as J_ε, well scaled as ε → 0), divided by ``cost_scale``.
-Every number is a parameter (:class:`ocp.model.ParameterLayout`), so the homotopy and parameter
+Every number is a parameter (:class:`mobisense.ocp.model.ParameterLayout`), so the homotopy and parameter
 sweeps re-solve the same graph: one SX kernel per interval, mapped over the intervals, expanded.
 """
 
@@ -14,15 +14,27 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
-from ocp.collocation import CollocationScheme
-from ocp.model import SensorKalmanModel, Structure, diagonal_indices
+from mobisense.ocp.collocation import CollocationScheme
+from mobisense.ocp.model import SensorKalmanModel, Structure
+from mobisense.ocp.problem import Problem
+from mobisense.ocp.state_layout import diagonal_indices
 
-__all__ = ["DirectCollocation", "NLPResult", "IPOPT_DEFAULTS", "COLD_START", "WARM_START"]
+__all__ = [
+    "DirectCollocation",
+    "NLPResult",
+    "IPOPT_DEFAULTS",
+    "COLD_START",
+    "WARM_START",
+    "transcription_for",
+    "transcription_cache_hits",
+    "clear_transcription_cache",
+]
 
 #: Ipopt options used by default. MUMPS' matching-based permutation and scaling are switched off and the
 #: fill-reducing ordering is AMD: on these banded collocation KKT systems that is the fastest combination
@@ -336,7 +348,7 @@ class DirectCollocation:
     def constraint_labels(self, sensor_names: list[str], t0: float, tf: float) -> list[tuple[str, float]]:
         """(description, time) of every NLP constraint, in problem terms."""
         s, d, K = self.structure, self.colloc.degree, self.intervals
-        state = s.state_labels(sensor_names)
+        state = s.state.labels(sensor_names)
         starts, nodes = self.times(t0, tf)
         labels: list[tuple[str, float]] = []
         for k in range(K):
@@ -351,3 +363,38 @@ class DirectCollocation:
             for r in range(d):
                 labels += [(f"|u| ≤ u_max of sensor {sensor_names[i]}", float(nodes[k, r])) for i in bounded]
         return labels
+
+
+@lru_cache(maxsize=16)
+def _cached_transcription(
+    structure: Structure,
+    scheme: str,
+    degree: int,
+    intervals: int,
+    tolerance: float,
+    max_iterations: int,
+    time_limit: float | None = None,
+) -> DirectCollocation:
+    extra = {} if time_limit is None else {"max_wall_time": time_limit}
+    return DirectCollocation(
+        structure, scheme, degree, intervals, ipopt_options=extra, tolerance=tolerance, max_iterations=max_iterations
+    )
+
+
+def transcription_for(problem: Problem) -> DirectCollocation:
+    """The (cached) transcription for ``problem``'s structure and solver options."""
+    opts = problem.solver
+    c = opts.collocation
+    return _cached_transcription(
+        Structure.of(problem), c.scheme, c.degree, c.intervals, opts.tolerance, opts.max_iterations, opts.time_limit
+    )
+
+
+def clear_transcription_cache() -> None:
+    """Forget every transcription built in this process (benchmarks of cold builds)."""
+    _cached_transcription.cache_clear()
+
+
+def transcription_cache_hits() -> int:
+    """How many times :func:`transcription_for` reused a built transcription in this process."""
+    return _cached_transcription.cache_info().hits

@@ -19,7 +19,7 @@ predictor, so the bordering row is a unit vector and the bordered Jacobian stays
 Δs grows by ``growth`` after an easy corrector (≤ 3 Newton iterations) and is halved after a failure or
 when the step cut a corner (tangent turned by more than ~26°, or the corrector moved more than Δs/2).
 :meth:`ArclengthTracker.advance_to` walks until the curve crosses a target ε going up and lands on it
-with a Newton solve at fixed ε — so the ε schedule of :func:`ocp.homotopy.run_continuation` (fixed δ
+with a Newton solve at fixed ε — so the ε schedule of :func:`mobisense.ocp.homotopy.run_continuation` (fixed δ
 steps as in the paper, adaptive, or straight to 1) drives it unchanged.
 """
 
@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ocp.bvp_collocation import NewtonResult, factorise, newton
+from mobisense.ocp.indirect.collocation_newton import NewtonResult, factorise, newton
 
 __all__ = ["ArclengthTracker", "TrackerReport"]
 

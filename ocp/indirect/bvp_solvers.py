@@ -6,14 +6,15 @@ A solver is built for one problem (its Hamiltonian system, parameters and unknow
 - ``follow(start, eps)`` — continue from an accepted solution of the same solver to ε (the homotopy).
 
 Both return a :class:`BVPSolution` (nodes, unknowns, dense evaluation, cost pieces, solver report).
-To add a solver, subclass :class:`BVPSolver` and decorate it with :func:`register_bvp_solver`.
+To add a solver, subclass :class:`BVPSolver` and decorate it with :func:`register_bvp_solver`: it is then a
+choice of ``solver.bvp.solver`` and ``solver.bvp.refine_solver`` (:data:`mobisense.ocp.registries.BVP_SOLVERS`).
 
 Solvers:
 
 ``collocation``
     CasADi collocation (the scheme and degree of ``solver.collocation``) on a uniform mesh of
     ``solver.bvp.intervals`` intervals, damped sparse Newton, and arclength continuation in ε
-    (:mod:`ocp.bvp_continuation`) — passes the folds of the default problem's solution curve.
+    (:mod:`mobisense.ocp.indirect.arclength`) — passes the folds of the default problem's solution curve.
 ``scipy``
     ``scipy.integrate.solve_bvp`` (4th-order Lobatto IIIA collocation with residual control and mesh
     refinement) with the vectorised CasADi right-hand side and exact Jacobians ``fun_jac``/``bc_jac``.
@@ -30,13 +31,14 @@ from typing import Any
 
 import numpy as np
 
-from ocp.bvp_collocation import collocation_mesh, newton
-from ocp.bvp_continuation import ArclengthTracker
-from ocp.bvp_system import HamiltonianSystem, hamiltonian_system
-from ocp.model import Structure
-from ocp.problem import Problem
+from mobisense.ocp.indirect.arclength import ArclengthTracker
+from mobisense.ocp.indirect.collocation_newton import collocation_mesh, newton
+from mobisense.ocp.indirect.hamiltonian import HamiltonianSystem, hamiltonian_system
+from mobisense.ocp.model import Structure
+from mobisense.ocp.problem import Problem
+from mobisense.ocp.registries import BVP_SOLVERS
 
-__all__ = ["BVPSolution", "BVPSolver", "BVP_SOLVERS", "register_bvp_solver", "CollocationBVP", "ScipyBVP"]
+__all__ = ["BVPSolution", "BVPSolver", "register_bvp_solver", "CollocationBVP", "ScipyBVP"]
 
 #: y(t) guess: times (T,) -> unscaled y = [x; μ] of shape (2 nx, T)
 Guess = Callable[[np.ndarray], np.ndarray]
@@ -53,7 +55,7 @@ class BVPSolution:
     t : ndarray, shape (m,)
         Node times (T).
     y : ndarray, shape (2 nx, m)
-        Unscaled [x; μ] at the nodes (μ = ε λ, see :mod:`ocp.bvp_system`).
+        Unscaled [x; μ] at the nodes (μ = ε λ, see :mod:`mobisense.ocp.indirect.hamiltonian`).
     evaluate : callable
         Dense solution: times (T,) -> (2 nx, T).
     terminal_cost, running_cost, control_energy : float
@@ -81,7 +83,7 @@ class BVPSolution:
 
     @property
     def cost_eps(self) -> float:
-        """J_ε = Φ + ∫ Tr KΣ + (1/ε) ∫ α/2|u|² (the homotopy family of :mod:`ocp.bvp_system`)."""
+        """J_ε = Φ + ∫ Tr KΣ + (1/ε) ∫ α/2|u|² (the homotopy family of :mod:`mobisense.ocp.indirect.hamiltonian`)."""
         if self.eps <= 0:
             return float("inf")
         return self.terminal_cost + (self.running_cost - self.control_energy) + self.control_energy / self.eps
@@ -94,7 +96,7 @@ class BVPSolver(ABC):
     ----------
     problem : Problem
     values : dict
-        Parameter values (:meth:`ocp.model.ParameterLayout.values`); ε is set per solve.
+        Parameter values (:meth:`mobisense.ocp.model.ParameterLayout.values`); ε is set per solve.
     scales : ndarray, shape (2 nx,)
         Scales D of the unknowns y = [x; μ].
     """
@@ -123,13 +125,9 @@ class BVPSolver(ABC):
 
 
 #: name -> solver class
-BVP_SOLVERS: dict[str, type[BVPSolver]] = {}
-
-
 def register_bvp_solver(cls: type[BVPSolver]) -> type[BVPSolver]:
     """Class decorator: make ``cls`` available as ``solver.bvp.solver: <cls.name>``."""
-    BVP_SOLVERS[cls.name] = cls
-    return cls
+    return BVP_SOLVERS.register(cls.name, cls)
 
 
 @register_bvp_solver

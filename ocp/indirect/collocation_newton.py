@@ -1,7 +1,7 @@
 """Collocation + Newton solver of the Pontryagin BVP, with ε as an optional unknown (for arclength steps).
 
-Unknowns on a mesh ``t_0 < … < t_K`` (scaled, see :mod:`ocp.bvp_system`): ``W = [z_0, Z_0, z_1, Z_1, …, z_K]``
-with ``z_k`` (ny,) at the interval starts and ``Z_k`` (ny d,) at the d collocation nodes of interval k.
+Unknowns on a mesh ``t_0 < … < t_K`` (scaled, see :mod:`mobisense.ocp.indirect.hamiltonian`): ``W = [z_0, Z_0, z_1,
+Z_1, …, z_K]`` with ``z_k`` (ny,) at the interval starts and ``Z_k`` (ny d,) at the d collocation nodes of interval k.
 Residuals, all O(1) for O(1) unknowns (time normalised by the horizon T = t_K − t_0):
 
     collocation  T (Σ_j D[j,r] z_j / h_k − f(Z_r)) = 0          (d ny per interval)
@@ -11,9 +11,9 @@ Residuals, all O(1) for O(1) unknowns (time normalised by the horizon T = t_K �
 — a square sparse system solved by damped Newton with a sparse LU (SuperLU), rows in staircase order
 (initial conditions, interval by interval, terminal conditions) so that no fill-reducing column
 permutation is needed. The same residual with ε appended as an unknown, bordered by one arclength
-equation, is what :mod:`ocp.bvp_continuation` uses to pass folds of the solution curve. Radau IIA
+equation, is what :mod:`mobisense.ocp.indirect.arclength` uses to pass folds of the solution curve. Radau IIA
 collocation of degree d is of order 2d − 1 at the mesh points, Gauss–Legendre of order 2d (the schemes
-of :mod:`ocp.collocation`).
+of :mod:`mobisense.ocp.collocation`).
 """
 
 from __future__ import annotations
@@ -28,9 +28,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from ocp.bvp_system import HamiltonianSystem, hamiltonian_system
-from ocp.collocation import CollocationScheme
-from ocp.model import Structure
+from mobisense.ocp.collocation import CollocationScheme
+from mobisense.ocp.indirect.hamiltonian import HamiltonianSystem, hamiltonian_system
+from mobisense.ocp.model import Structure
 
 __all__ = ["CollocationMesh", "NewtonResult", "newton", "factorise", "collocation_mesh"]
 

@@ -1,6 +1,6 @@
 """The Pontryagin boundary-value problem of the mobile-sensor Kalman problem (SPEC §1.3–1.4), by AD.
 
-Everything is derived with CasADi from the model's own functions (:class:`ocp.model.SensorKalmanModel`):
+Everything is derived with CasADi from the model's own functions (:class:`mobisense.ocp.model.SensorKalmanModel`):
 no adjoint is written by hand.
 
 Homotopy family (our choice, documented)
@@ -48,25 +48,11 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from ocp.config import ConfigError
-from ocp.model import SensorKalmanModel, Structure, diagonal_indices, vec_to_sym
+from mobisense.core.config import ConfigError
+from mobisense.ocp.model import SensorKalmanModel, Structure
+from mobisense.ocp.state_layout import diagonal_indices
 
-__all__ = ["HamiltonianSystem", "hamiltonian_system", "costate_matrix", "costate_vector"]
-
-
-def costate_matrix(mu_sigma: np.ndarray, n: int) -> np.ndarray:
-    """Symmetric matrix costate Λ (..., n, n) from the costate (..., n(n+1)/2) of the upper triangle σ."""
-    Lam = vec_to_sym(np.asarray(mu_sigma, float), n)
-    off = ~np.eye(n, dtype=bool)
-    Lam[..., off] *= 0.5  # SPEC §1.4 with σ_ij standing for Σ_ij and Σ_ji: μ_σij = 2 Λ_ij
-    return Lam
-
-
-def costate_vector(Lam: np.ndarray, n: int) -> np.ndarray:
-    """Inverse of :func:`costate_matrix`: costate of σ (..., n(n+1)/2) from Λ (..., n, n)."""
-    rows, cols = np.triu_indices(n)
-    factor = np.where(rows == cols, 1.0, 2.0)
-    return np.asarray(Lam, float)[..., rows, cols] * factor
+__all__ = ["HamiltonianSystem", "hamiltonian_system"]
 
 
 @dataclass(frozen=True)
@@ -78,7 +64,7 @@ class _Functions:
 
 
 class HamiltonianSystem:
-    """State–costate system of one problem :class:`~ocp.model.Structure`, as CasADi functions.
+    """State–costate system of one problem :class:`~mobisense.ocp.model.Structure`, as CasADi functions.
 
     Parameters
     ----------
@@ -104,7 +90,7 @@ class HamiltonianSystem:
     """
 
     def __init__(self, structure: Structure) -> None:
-        if any(structure.bounded_control):  # also rejected when the problem is validated (ocp.problem)
+        if any(structure.bounded_control):  # also rejected when the problem is validated (mobisense.ocp.problem)
             raise ConfigError(
                 f"sensors[{structure.bounded_control.index(True)}].u_max: expected no control bound with the "
                 "indirect method (its control law would be a non-smooth saturation); remove u_max or use "
@@ -185,11 +171,10 @@ class HamiltonianSystem:
 
     def _coasting_end(self, P: ca.SX, b: dict) -> ca.SX:
         """State at tf of the coasting sensors (u ≡ 0): p0 + v0 (tf − t0), v0 (Σ entries: Σ0, unused)."""
-        s = self.structure
+        state = self.structure.state
         x0 = self.model.x0(P)
-        p0 = x0[s.n_sigma : s.n_sigma + 2 * s.N]
-        v0 = x0[s.n_sigma + 2 * s.N :]
-        return ca.vertcat(x0[: s.n_sigma], p0 + v0 * (b["tf"] - b["t0"]), v0)
+        p0, v0 = x0[state.positions], x0[state.velocities]
+        return ca.vertcat(x0[state.sigma], p0 + v0 * (b["tf"] - b["t0"]), v0)
 
     # ------------------------------------------------------------------ numeric evaluation
     def _map(self, name: str, m: int) -> ca.Function:
@@ -236,7 +221,7 @@ class HamiltonianSystem:
         peak = np.abs(y_guess).max(axis=1)
         D = np.empty(2 * nx)
         D[:nx] = np.maximum(x_scale, peak[:nx])
-        groups = [np.arange(s.n_sigma), np.arange(s.n_sigma, s.n_sigma + 2 * s.N), np.arange(s.n_sigma + 2 * s.N, nx)]
+        groups = [np.arange(nx)[block] for block in s.state.groups.values()]
         all_peak = max(float(peak[nx:].max()), 1e-12)
         for group in groups:
             group_peak = max(float(peak[nx + group].max()), 1e-6 * all_peak)

@@ -20,27 +20,11 @@ from typing import Any
 
 import numpy as np
 
-from ocp.bvp_system import costate_vector, hamiltonian_system
-from ocp.model import Structure, sym_to_vec
-from ocp.solution import Solution
+from mobisense.ocp.indirect.hamiltonian import hamiltonian_system
+from mobisense.ocp.model import Structure
+from mobisense.ocp.solution import Solution
 
-__all__ = ["solution_states_costates", "optimality_residuals", "common_times"]
-
-
-def solution_states_costates(solution: Solution) -> tuple[np.ndarray, np.ndarray]:
-    """States x (T, nx) on ``solution.t`` and costates λ (Tc, nx) on ``solution.t_costate``."""
-    n, N = solution.problem.n, solution.problem.N
-    x = np.column_stack(
-        [
-            np.array([sym_to_vec(S, n) for S in solution.Sigma]),
-            solution.p.reshape(-1, 2 * N),
-            solution.v.reshape(-1, 2 * N),
-        ]
-    )
-    lam = np.column_stack(
-        [costate_vector(solution.Lam, n), solution.lam_p.reshape(-1, 2 * N), solution.lam_v.reshape(-1, 2 * N)]
-    )
-    return x, lam
+__all__ = ["optimality_residuals", "common_times"]
 
 
 def common_times(solution: Solution) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -70,11 +54,11 @@ def optimality_residuals(solution: Solution) -> dict[str, Any]:
     system = hamiltonian_system(Structure.of(problem))
     nx = system.structure.nx
     P = system.layout.pack(system.layout.values(problem, eps=1.0))
-    x, lam = solution_states_costates(solution)
+    x, lam = solution.states(), solution.costates()
     times, i_u, i_t, i_c = common_times(solution)
     xs, us, lams = x[i_t], solution.u.reshape(len(solution.t_u), -1)[i_u], lam[i_c]
     m = len(times)
-    # SPEC §1.4 at ε = 1: H = L + λ'f (and H̃ = H, μ = λ in ocp.bvp_system)
+    # SPEC §1.4 at ε = 1: H = L + λ'f (and H̃ = H, μ = λ in mobisense.ocp.indirect.hamiltonian)
     dHdu = np.asarray(system.dHdu.map(m)(xs.T, us.T, lams.T, P)).T
     L = np.asarray(system.model.running.map(m)(xs.T, us.T, P))[0]
     f = np.asarray(system.model.f.map(m)(xs.T, us.T, P)).T

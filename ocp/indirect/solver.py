@@ -1,11 +1,11 @@
 """Solve the mobile-sensor Kalman problem by the indirect method: the PMP boundary-value problem (SPEC §1.4).
 
-``solve_indirect(problem)`` does what the source paper does: start from the classical Kalman filter
-(ε = 0: sensors coast, Σ from the Riccati IVP, costates from the adjoint equations integrated backwards),
-continue in ε with the schedule of ``solver.homotopy`` (:func:`ocp.homotopy.run_continuation`) and the
-BVP solver of ``solver.bvp`` (:mod:`ocp.bvp_solvers`), and return a :class:`~ocp.solution.Solution`
-whose ``stats`` carry the ``indirect`` block and the optimality residuals. ``refine_from_direct`` solves
-the BVP at ε = 1 from a direct solution's states and multiplier costates instead.
+``solve_indirect(problem)`` does what the source paper does: start from the classical Kalman filter (ε = 0: sensors
+coast, Σ from the Riccati IVP, costates from the adjoint equations integrated backwards), continue in ε with the
+schedule of ``solver.homotopy`` (:func:`mobisense.ocp.homotopy.run_continuation`) and the BVP solver of ``solver.bvp``
+(:mod:`mobisense.ocp.indirect.bvp_solvers`), and return a :class:`~mobisense.ocp.solution.Solution` whose ``stats``
+carry the ``indirect`` block and the optimality residuals. ``refine_from_direct`` solves the BVP at ε = 1 from a direct
+solution's states and multiplier costates instead.
 """
 
 from __future__ import annotations
@@ -18,14 +18,15 @@ import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.interpolate import CubicSpline
 
-from ocp.bvp_residuals import optimality_residuals, solution_states_costates
-from ocp.bvp_solvers import BVP_SOLVERS, BVPSolution, BVPSolver, Guess
-from ocp.bvp_system import HamiltonianSystem, costate_matrix, hamiltonian_system
-from ocp.homotopy import run_continuation
-from ocp.model import Structure, vec_to_sym
-from ocp.problem import Problem
-from ocp.simulate import Trajectory, integrate
-from ocp.solution import HomotopyStep, Solution
+from mobisense.ocp.homotopy import run_continuation
+from mobisense.ocp.indirect.bvp_solvers import BVPSolution, BVPSolver, Guess
+from mobisense.ocp.indirect.hamiltonian import HamiltonianSystem, hamiltonian_system
+from mobisense.ocp.indirect.residuals import optimality_residuals
+from mobisense.ocp.model import Structure
+from mobisense.ocp.problem import Problem
+from mobisense.ocp.registries import BVP_SOLVERS
+from mobisense.ocp.simulate import Trajectory, integrate
+from mobisense.ocp.solution import HomotopyStep, Solution, SolveStatus
 
 __all__ = [
     "solve_indirect",
@@ -82,7 +83,7 @@ def _direct_guess(direct: Solution) -> Guess:
     """y(t) from a direct solution: states on its grid, multiplier costates on its costate grid (linear)."""
     if direct.Lam is None:
         raise ValueError("the direct solution carries no costates (it did not converge at any ε)")
-    x, lam = solution_states_costates(direct)
+    x, lam = direct.states(), direct.costates()
     mu = direct.eps * lam  # μ = ε λ
 
     def guess(times: np.ndarray) -> np.ndarray:
@@ -100,10 +101,10 @@ def make_bvp_solver(problem: Problem, name: str, guess: Guess) -> BVPSolver:
     ----------
     problem : Problem
     name : str
-        Key of :data:`ocp.bvp_solvers.BVP_SOLVERS` (``"collocation"`` or ``"scipy"``).
+        Key of :data:`mobisense.ocp.registries.BVP_SOLVERS` (``"collocation"`` or ``"scipy"``).
     guess : callable
         times (T,) -> y = [x; μ] (2 nx, T), sampled at 401 points for
-        :meth:`~ocp.bvp_system.HamiltonianSystem.default_scales`.
+        :meth:`~mobisense.ocp.indirect.hamiltonian.HamiltonianSystem.default_scales`.
     """
     system = hamiltonian_system(Structure.of(problem))
     values = system.layout.values(problem)
@@ -113,17 +114,19 @@ def make_bvp_solver(problem: Problem, name: str, guess: Guess) -> BVPSolver:
     return BVP_SOLVERS[name](problem, values, scales)
 
 
-def refine_from_direct(direct: Solution, solver: str | None = None) -> BVPSolution:
+def refine_from_direct(direct: Solution, solver: str | None = None, problem: Problem | None = None) -> BVPSolution:
     """Solve the BVP at ε = 1 starting from ``direct`` (states + multiplier costates).
 
     Parameters
     ----------
     direct : Solution
-        A converged direct solution (ε = 1).
+        A converged solution at ε = 1 with costates (direct, or indirect of a neighbouring problem).
     solver : str, optional
-        Name in :data:`ocp.bvp_solvers.BVP_SOLVERS` (default ``solver.bvp.refine_solver``).
+        Name in :data:`mobisense.ocp.registries.BVP_SOLVERS` (default ``solver.bvp.refine_solver``).
+    problem : Problem, optional
+        The problem to solve (default ``direct.problem``); it must have the same structure.
     """
-    problem = direct.problem
+    problem = problem or direct.problem
     guess = _direct_guess(direct)
     bvp = make_bvp_solver(problem, solver or problem.solver.bvp.refine_solver, guess)
     if bvp.name == "scipy":
@@ -134,34 +137,24 @@ def refine_from_direct(direct: Solution, solver: str | None = None) -> BVPSoluti
 def solution_from_bvp(problem: Problem, bvp: BVPSolution, method: str = "indirect") -> Solution:
     """A :class:`Solution` (states, controls, PMP costates λ = μ/ε on the BVP nodes) from a BVP solution."""
     system = hamiltonian_system(Structure.of(problem))
-    s = system.structure
-    n, N, nx = s.n, s.N, s.nx
+    nx = system.structure.nx
     P = system.layout.pack({**system.layout.values(problem), "eps": bvp.eps})
     x, mu = bvp.y[:nx].T, bvp.y[nx:].T
     u = np.asarray(system.control.map(bvp.nodes)(x.T, mu.T, P)).T
-    solution = Solution(
-        problem=problem,
-        method=method,
-        status="solved" if bvp.success and bvp.eps == 1.0 else "failed",
-        message=bvp.message,
-        eps=bvp.eps,
+    return Solution.from_states(
+        problem,
+        method,
+        SolveStatus.SOLVED if bvp.success and bvp.eps == 1.0 else SolveStatus.FAILED,
+        bvp.message,
+        bvp.eps,
         t=bvp.t,
-        Sigma=vec_to_sym(x[:, : s.n_sigma], n),
-        p=x[:, s.n_sigma : s.n_sigma + 2 * N].reshape(-1, N, 2),
-        v=x[:, s.n_sigma + 2 * N :].reshape(-1, N, 2),
+        x=x,
         t_u=bvp.t,
-        u=u.reshape(-1, N, 2),
-        terminal_cost=bvp.terminal_cost,
-        running_cost=bvp.running_cost,
-        control_energy=bvp.control_energy,
+        u=u,
+        costs=(bvp.terminal_cost, bvp.running_cost, bvp.control_energy),
+        t_costate=bvp.t,
+        lam=mu / bvp.eps if bvp.eps > 0 else None,  # λ = μ/ε (at ε = 0 only μ ≡ 0 is defined)
     )
-    if bvp.eps > 0:  # λ = μ/ε (at ε = 0 only μ ≡ 0 is defined)
-        lam = mu / bvp.eps
-        solution.t_costate = bvp.t
-        solution.Lam = costate_matrix(lam[:, : s.n_sigma], n)
-        solution.lam_p = lam[:, s.n_sigma : s.n_sigma + 2 * N].reshape(-1, N, 2)
-        solution.lam_v = lam[:, s.n_sigma + 2 * N :].reshape(-1, N, 2)
-    return solution
 
 
 def indirect_summary(bvp: BVPSolution, solver: str, time_s: float, records: list[dict[str, Any]]) -> dict[str, Any]:
@@ -200,12 +193,58 @@ def _distinct(values: list[float], rtol: float = 1e-6) -> list[float]:
     return out
 
 
-def solve_indirect(problem: Problem, progress: Callable[[HomotopyStep], None] | None = None) -> Solution:
+def solve_indirect(
+    problem: Problem,
+    progress: Callable[[HomotopyStep], None] | None = None,
+    init: Solution | None = None,
+) -> Solution:
     """Solve ``problem`` by the indirect method with ε-continuation from the Kalman solution.
+
+    Parameters
+    ----------
+    problem : Problem
+    progress : callable, optional
+        Called with a :class:`HomotopyStep` after every ε step.
+    init : Solution, optional
+        A converged solution with costates (direct or indirect) of a problem of the same structure: its
+        states and costates seed the BVP at ε = 1 directly (with ``solver.bvp.refine_solver``); if that
+        does not converge, the continuation from the Kalman solution runs.
 
     See :func:`indirect_continuation`, which also returns the dense BVP solution.
     """
+    if init is not None and init.success and init.Lam is not None:
+        seeded = _solve_seeded(problem, init)
+        if seeded is not None:
+            return seeded
     return indirect_continuation(problem, progress)[0]
+
+
+def _solve_seeded(problem: Problem, init: Solution) -> Solution | None:
+    """The BVP at ε = 1 from ``init``'s states and costates, or None if it did not converge there."""
+    if Structure.of(init.problem) != Structure.of(problem):
+        return None
+    t_start = time.perf_counter()
+    bvp = refine_from_direct(init, problem=problem)
+    if not (bvp.success and bvp.eps == 1.0):
+        return None
+    elapsed = time.perf_counter() - t_start
+    system = hamiltonian_system(Structure.of(problem))
+    P = system.layout.pack(system.layout.values(problem))
+    coasting = integrate(system.model, P, np.linspace(problem.horizon.t0, problem.horizon.tf, 401))
+    solution = solution_from_bvp(problem, bvp)
+    solution.message = f"converged at ε = 1 from the states and costates of init ({init.method} method)"
+    solution.baseline = {
+        "cost": coasting.cost,
+        "terminal_cost": coasting.terminal_cost,
+        "running_cost": coasting.running_cost,
+    }
+    solution.stats = {
+        "indirect": indirect_summary(bvp, problem.solver.bvp.refine_solver, elapsed, [_record(bvp)]),
+        "optimality": {"indirect": optimality_residuals(solution)},
+        "total_time_s": elapsed,
+        "start": "seeded from init at ε = 1",
+    }
+    return solution
 
 
 def indirect_continuation(
@@ -274,11 +313,10 @@ def indirect_continuation(
         "running_cost": coasting.running_cost,
     }
     if accepted:
+        nx = system.structure.nx
         solution.path_eps = np.array([r.eps for r in accepted])
-        paths = [r.evaluate(final.t) for r in accepted]
-        s = system.structure
-        solution.path_p = np.stack([y[s.n_sigma : s.n_sigma + 2 * s.N].T.reshape(-1, s.N, 2) for y in paths])
-        solution.path_Sigma = np.stack([vec_to_sym(y[: s.n_sigma].T, s.n) for y in paths])
+        path_x = np.stack([r.evaluate(final.t)[:nx].T for r in accepted])
+        solution.path_Sigma, solution.path_p, _ = solution.layout.split(path_x)
     summary = indirect_summary(final, name, elapsed, records)
     if polish is not None:
         summary["polish"] = polish

@@ -8,9 +8,11 @@ from pathlib import Path
 
 import pytest
 
-import cli
+from mobisense import cli
 
-ROOT = Path(__file__).resolve().parent.parent
+pytestmark = pytest.mark.slow  # every test here runs solvers or subprocesses for seconds
+
+ROOT = Path(__file__).resolve().parents[2]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
 BLOCKS = re.findall(r"```(?:sh|bash|console)\n(.*?)```", README, flags=re.S)
 COMMANDS = [line.strip() for block in BLOCKS for line in block.splitlines() if line.strip().startswith("mobisense ")]
@@ -27,3 +29,13 @@ def test_readme_command_runs(command, tmp_path, monkeypatch):
     args = shlex.split(command)[1:]
     args = [str(tmp_path / Path(a).name) if i > 0 and args[i - 1] == "--out" else a for i, a in enumerate(args)]
     assert cli.main(args) == 0, command
+
+
+PYTHON_BLOCKS = re.findall(r"```python\n(.*?)```", README, flags=re.S)
+
+
+@pytest.mark.parametrize("block", PYTHON_BLOCKS, ids=[f"python-{i}" for i in range(len(PYTHON_BLOCKS))])
+def test_readme_python_runs(block, tmp_path, monkeypatch):
+    monkeypatch.chdir(ROOT)
+    code = block.replace('"out/', f'"{tmp_path}/')
+    exec(compile(code, "README.md", "exec"), {})  # noqa: S102  (the README's own example)

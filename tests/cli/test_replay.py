@@ -10,9 +10,9 @@ import pytest
 import xarray as xr
 import yaml
 
-from cli import main
+from mobisense.cli import main
 
-PROBLEMS = Path(__file__).resolve().parent.parent / "problems"
+PROBLEMS = Path(__file__).resolve().parents[2] / "problems"
 
 
 def shipped(name: str) -> dict:
@@ -26,15 +26,16 @@ def write(tmp_path: Path, data: dict, name: str = "scenario.yaml") -> Path:
 
 
 def test_every_shipped_scenario_validates():
-    from formation.ocp_replay import OcpReplayScenario
-    from formation.replay_scenario import FieldReplayScenario
-    from ocp.config import load_config
+    from mobisense.core.config import load_config
+    from mobisense.formation.replay.plan import OcpReplayScenario
+    from mobisense.formation.replay.scenario import FieldReplayScenario
 
     for name in ("replay_two_charges", "replay_isotherm13"):
         load_config(PROBLEMS / f"{name}.yaml", FieldReplayScenario)
     load_config(PROBLEMS / "replay_hussein2008.yaml", OcpReplayScenario)
 
 
+@pytest.mark.slow
 def test_field_replay_writes_result_summary_figures_and_animation(tmp_path, capsys):
     data = shipped("replay_two_charges")
     data.update(duration=1.0)  # 10 samples: outputs and animation, not the dynamics, are tested here
@@ -57,6 +58,7 @@ def test_field_replay_writes_result_summary_figures_and_animation(tmp_path, caps
     assert "replay_two_charges" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_shape_from_a_steady_state_summary(tmp_path):
     formation = {"formation": "cross", "noise": {"sigma_process": 0.02, "sigma_measurement": 0.05,
                  "sigma_hessian": 0.02}, "bounds": {"a": [0.5, 3.0], "b": [0.5, 3.0]}}  # fmt: skip

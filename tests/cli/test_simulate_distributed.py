@@ -10,10 +10,10 @@ import pytest
 import xarray as xr
 import yaml
 
-from cli import main
-from estimation.distributed_mesh import SensorMesh
+from mobisense.cli import main
+from mobisense.estimation.distributed.mesh import SensorMesh
 
-SCENARIO = Path(__file__).resolve().parent.parent / "problems" / "distributed_advection_diffusion.yaml"
+SCENARIO = Path(__file__).resolve().parents[2] / "problems" / "distributed_advection_diffusion.yaml"
 
 
 @pytest.fixture(scope="module")
@@ -22,6 +22,7 @@ def shipped_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, Path]:
     return main(["simulate", "distributed", str(SCENARIO), "--out", str(out)]), out
 
 
+@pytest.mark.slow
 def test_shipped_scenario_writes_results_table_and_figures(shipped_run: tuple[int, Path]) -> None:
     status, out = shipped_run
     assert status == 0

@@ -10,11 +10,11 @@ import pytest
 import xarray as xr
 import yaml
 
-from cli import main
-from formation.leader_follower_scenario import LeaderFollowerScenario
-from ocp.config import load_config
+from mobisense.cli import main
+from mobisense.core.config import load_config
+from mobisense.formation.leader_follower.scenario import LeaderFollowerScenario
 
-PROBLEMS = Path(__file__).resolve().parent.parent / "problems"
+PROBLEMS = Path(__file__).resolve().parents[2] / "problems"
 SHIPPED = sorted(PROBLEMS.glob("leader_follower_*.yaml"))
 
 
@@ -37,6 +37,7 @@ def test_shipped_required_scenarios_exist() -> None:
     assert names >= {f"leader_follower_{n}" for n in ("control1", "control2", "control3", "five_agents")}
 
 
+@pytest.mark.slow
 def test_control1_vs_control2_end_to_end(tmp_path: Path) -> None:
     out = tmp_path / "out"
     scenario = PROBLEMS / "leader_follower_control2.yaml"
@@ -59,6 +60,7 @@ def test_control1_vs_control2_end_to_end(tmp_path: Path) -> None:
     assert set(summary["files"]) == files
 
 
+@pytest.mark.slow
 def test_ring_sensing_end_to_end(tmp_path: Path) -> None:
     """The Khepera scenario, shortened: active pairs recorded, estimates feed the control, seed reproducible."""
 
@@ -87,6 +89,7 @@ def test_ring_sensing_end_to_end(tmp_path: Path) -> None:
     assert entry["fraction_with_active_pair"] > 0.9 and entry["rms_position_error"] < 0.02
 
 
+@pytest.mark.slow
 def test_no_plot_writes_no_figures(tmp_path: Path) -> None:
     out = tmp_path / "out"
     path = PROBLEMS / "leader_follower_control1.yaml"

@@ -7,9 +7,9 @@ import math
 
 import pytest
 import yaml
+from reference_problems import PROBLEMS, hussein2008
 
-import cli
-from tests.problems import PROBLEMS, hussein2008
+from mobisense import cli
 
 
 def write(tmp_path, data, name="problem.yaml"):
@@ -24,6 +24,7 @@ def run_cli(args, capsys):
     return code, captured.out, captured.err
 
 
+@pytest.mark.slow
 def test_solve_writes_the_contract(tmp_path, capsys):
     out = tmp_path / "out"
     code, stdout, _ = run_cli(["solve", PROBLEMS / "hussein2008.yaml", "--out", out, "--intervals", "40"], capsys)
@@ -107,7 +108,7 @@ BAD_INPUTS = [
     (
         "solver.collocation.scheme",
         _mutate(["solver", "collocation", "scheme"], "gauss"),
-        "expected 'radau' or 'legendre'",
+        "unknown collocation scheme 'gauss'; expected one of 'legendre', 'radau'",
     ),
     ("solver.homotopy.step", _mutate(["solver", "homotopy", "step"], 2.0), "expected less than or equal to 1"),
 ]

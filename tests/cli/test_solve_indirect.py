@@ -7,10 +7,12 @@ import json
 import numpy as np
 import pytest
 import xarray as xr
+from reference_problems import PROBLEMS
 
-import cli
-from ocp.solution import Solution
-from tests.problems import PROBLEMS
+from mobisense import cli
+from mobisense.ocp.solution import Solution
+
+pytestmark = pytest.mark.slow  # every test here runs solvers or subprocesses for seconds
 
 
 @pytest.fixture(scope="module")

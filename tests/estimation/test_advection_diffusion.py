@@ -6,8 +6,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from estimation.advection_diffusion import AdvectionDiffusionField
-from estimation.fields import FIELDS, make_field
+from mobisense.estimation.fields.advection_diffusion import AdvectionDiffusionField
+from mobisense.estimation.fields.base import FIELDS, make_field
 
 THETA, V, K = 2.0, np.array([0.5, 1.0]), 0.005
 STEP = 1e-30  # complex-step increment: derivative error O(STEP²), no subtractive cancellation

@@ -6,13 +6,12 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from estimation import kalman
-from estimation.coloured_filter import run_coloured_filter
-from estimation.cooperative_filter import CooperativeKalmanFilter, run_cooperative_filter
-from estimation.field_library import QuadraticField
-from estimation.gramians import gramians
-from estimation.hessian_estimation import LeastSquaresHessian
-from estimation.information_model import (
+from mobisense.estimation import kalman
+from mobisense.estimation.cooperative.coloured_filter import run_coloured_filter
+from mobisense.estimation.cooperative.filter import CooperativeKalmanFilter, run_cooperative_filter
+from mobisense.estimation.cooperative.gramians import gramians
+from mobisense.estimation.cooperative.hessian import LeastSquaresHessian
+from mobisense.estimation.cooperative.information_model import (
     cross_formation,
     formation_center,
     hessian_drift,
@@ -21,9 +20,10 @@ from estimation.information_model import (
     transition_matrix,
     vec_to_hessian,
 )
-from estimation.noise_config import CooperativeNoise
-from estimation.spatial_noise import SpatialNoise
-from estimation.steady_state import steady_state
+from mobisense.estimation.cooperative.noise_config import CooperativeNoise
+from mobisense.estimation.cooperative.spatial_noise import SpatialNoise
+from mobisense.estimation.cooperative.steady_state import steady_state
+from mobisense.estimation.fields.library import QuadraticField
 
 
 def _trajectory(K: int, a: float = 1.0, b: float = 1.4) -> np.ndarray:
@@ -52,7 +52,7 @@ def test_taylor_model_is_exact_on_quadratic_fields() -> None:
     np.testing.assert_allclose(h, np.r_[0.5 * shift @ field.H @ shift, field.H @ shift], atol=1e-15)
     np.testing.assert_allclose(_truth(field, moved), transition_matrix(shift) @ s + h, atol=1e-13)
     # the symbolic cross rows used by the shape design agree with taylor_matrices
-    from estimation.formation_design import cross_taylor_symbolic
+    from mobisense.estimation.cooperative.formation_design import cross_taylor_symbolic
 
     Cs, Ds = cross_taylor_symbolic(0.7, 1.3, 0.4)
     Cn, Dn = taylor_matrices(cross_formation(0.7, 1.3, orientation=0.4))

@@ -6,7 +6,8 @@ import control
 import numpy as np
 import pytest
 
-from estimation.distributed_filter import (
+from mobisense.estimation.cooperative.information_model import hessian_to_vec
+from mobisense.estimation.distributed.filter import (
     CellFilter,
     DistributedFilter,
     FilterOptions,
@@ -16,9 +17,8 @@ from estimation.distributed_filter import (
     cell_transition,
     fit_hessian,
 )
-from estimation.distributed_fvm import far_points, laplacian_stencil, pde_constraint, project
-from estimation.distributed_mesh import SensorMesh, grid_network, seed_network
-from estimation.information_model import hessian_to_vec
+from mobisense.estimation.distributed.fvm import far_points, laplacian_stencil, pde_constraint, project
+from mobisense.estimation.distributed.mesh import SensorMesh, grid_network, seed_network
 
 THETA, V = 2.0, np.array([0.5, 1.0])
 # v'Hv = 0 and H11 = H22: z below is linear in t at a fixed point and the square-cell FVM is exact
@@ -200,6 +200,7 @@ def test_cell_filter_matches_filterpy() -> None:
         assert np.allclose(cell.covariance, chains[0].P, rtol=1e-9, atol=1e-15)
 
 
+@pytest.mark.slow
 def test_constrained_filter_beats_unconstrained_with_a_consistent_constraint() -> None:
     """Square cells translating through the exact polynomial solution: G x = g holds for the truth.
 
@@ -214,6 +215,7 @@ def test_constrained_filter_beats_unconstrained_with_a_consistent_constraint() -
         assert np.all(ratio < 0.95), (seed, ratio)
 
 
+@pytest.mark.slow
 def test_the_constraint_needs_the_right_advection() -> None:
     """The same run with a filter told v = 0 or −v: the constraint then misstates ∂z/∂t and the error grows.
 

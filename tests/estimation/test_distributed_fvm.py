@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimation.distributed_fvm import far_points, laplacian_stencil, mesh_laplacian, pde_constraint, project
-from estimation.distributed_mesh import MeshError, SensorMesh, grid_network, seed_network
+from mobisense.estimation.distributed.fvm import far_points, laplacian_stencil, mesh_laplacian, pde_constraint, project
+from mobisense.estimation.distributed.mesh import MeshError, SensorMesh, grid_network, seed_network
 
 H = np.array([[1.3, 0.4], [0.4, -0.7]])  # a generic symmetric Hessian (trace 0.6)
 G0 = np.array([0.2, -0.5])

@@ -5,7 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimation.field_library import (
+from mobisense.core.config import ConfigError, StrictModel, parse_config
+from mobisense.core.files import write_netcdf
+from mobisense.estimation.cooperative.spatial_noise import KERNELS, SpatialNoise
+from mobisense.estimation.fields.base import FIELDS, Field
+from mobisense.estimation.fields.gridded import GriddedField
+from mobisense.estimation.fields.library import (
     FieldSpec,
     OceanTemperatureField,
     QuadraticField,
@@ -13,11 +18,6 @@ from estimation.field_library import (
     grid_dataset,
     load_fields,
 )
-from estimation.fields import FIELDS, Field
-from estimation.gridded_field import GriddedField
-from estimation.spatial_noise import KERNELS, SpatialNoise
-from ocp.config import ConfigError, StrictModel, parse_config
-from ocp.files import write_netcdf
 
 
 @pytest.fixture(scope="module")

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimation.field_library import OceanTemperatureField, QuadraticField, TwoChargesField
-from estimation.hessian_estimation import curvature_hessian, least_squares_hessian, one_step_filter
-from estimation.information_model import cross_formation
+from mobisense.estimation.cooperative.hessian import curvature_hessian, least_squares_hessian, one_step_filter
+from mobisense.estimation.cooperative.information_model import cross_formation
+from mobisense.estimation.fields.library import OceanTemperatureField, QuadraticField, TwoChargesField
 
 QUADRATIC = QuadraticField([[1.0, 0.3], [0.3, -0.5]], [1.0, 2.0], 3.0)
 

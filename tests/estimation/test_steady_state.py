@@ -8,14 +8,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cli import main
-from estimation import kalman
-from estimation.formation_design import adaptive_shape_step, design_cross_formation
-from estimation.information_model import cross_formation, taylor_matrices
-from estimation.noise_config import CooperativeNoise
-from estimation.steady_state import cross_steady_state, cross_trace, cross_trace_function, steady_state
+from mobisense.cli import main
+from mobisense.estimation import kalman
+from mobisense.estimation.cooperative.formation_design import adaptive_shape_step, design_cross_formation
+from mobisense.estimation.cooperative.information_model import cross_formation, taylor_matrices
+from mobisense.estimation.cooperative.noise_config import CooperativeNoise
+from mobisense.estimation.cooperative.steady_state import (
+    cross_steady_state,
+    cross_trace,
+    cross_trace_function,
+    steady_state,
+)
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SIGMAS = [(0.1, 0.5, 1.0), (1.0, 1.0, 1.0), (0.3, 0.2, 0.0), (2.0, 0.05, 3.0)]
 
 
@@ -114,6 +119,7 @@ def test_bounded_optimum_matches_brute_force_and_is_classified(sigmas, equal: bo
     assert (eig.min() < 0) == (kind == "saddle")
 
 
+@pytest.mark.slow
 def test_adaptive_step_minimises_the_filter_covariance() -> None:
     """Step (3A): J_k at the chosen shape is ½ tr P(+) of a filter update, and no grid shape does better."""
     noise = CooperativeNoise.from_sigmas(0.1, 0.5, 1.0)
@@ -140,6 +146,7 @@ def test_adaptive_step_minimises_the_filter_covariance() -> None:
         ("formation_cross_interior", "minimum"),
     ],
 )
+@pytest.mark.slow
 def test_cli_steady_state(tmp_path: Path, name: str, kind: str) -> None:
     out = tmp_path / name
     assert main(["steady-state", str(ROOT / "problems" / f"{name}.yaml"), "--out", str(out)]) == 0

@@ -9,8 +9,14 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from estimation.range_ring import KHEPERA_MOUNT_ANGLES_DEG, KHEPERA_PAIRS, RangeSensorRing, cosine_ratio, triangulate
-from estimation.switching_kalman import (
+from mobisense.estimation.tracking.range_ring import (
+    KHEPERA_MOUNT_ANGLES_DEG,
+    KHEPERA_PAIRS,
+    RangeSensorRing,
+    cosine_ratio,
+    triangulate,
+)
+from mobisense.estimation.tracking.switching_filter import (
     C_POSITION,
     SwitchingKalmanFilter,
     merge_closest,
@@ -170,6 +176,7 @@ def test_merges():
     np.testing.assert_allclose(P, covariances[0], rtol=1e-14)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("merge", ["closest", "information"])
 def test_switching_filter_error_stays_bounded_across_sensor_boundaries(merge):
     """A target sweeping the front half-plane of a stationary ring crosses every pair boundary and two gaps.

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimation.distributed_mesh import SensorMesh, seed_network
-from formation.gradient_formation import (
+from mobisense.core.config import ConfigError, parse_config
+from mobisense.estimation.distributed.mesh import SensorMesh, seed_network
+from mobisense.formation.distributed.gradient_formation import (
     FormationOptions,
     GradientFormation,
     desired_spacing,
@@ -15,7 +16,6 @@ from formation.gradient_formation import (
     spacing_term,
     weighted_gradients,
 )
-from ocp.config import ConfigError, parse_config
 
 EPS = {"epsilon1": 2e-3, "epsilon2": 1e-4, "epsilon3": 5.0}  # spacing in (5, 25)
 SLOPE = np.array([0.006, -0.008])  # constant gradient |g| = 0.01

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from formation.jacobi import JacobiTransform, default_tree, jacobi_matrix
-from formation.shape_control import FixedShapeController
+from mobisense.formation.jacobi import JacobiTransform, default_tree, jacobi_matrix
+from mobisense.formation.shape_control import FixedShapeController
 
 # Every identity below is exact algebra on O(1) numbers: round-off of a few ulps, so 1e-13 (≈ 500 ulp)
 ROUND_OFF = 1e-13

@@ -7,8 +7,8 @@ import math
 import numpy as np
 from scipy.optimize import brentq
 
-from formation.leader_follower_paths import chord_window, enclosed_areas, path_deviation
-from formation.leader_follower_references import PathReference
+from mobisense.formation.leader_follower.paths import chord_window, enclosed_areas, path_deviation
+from mobisense.formation.leader_follower.references import PathReference
 
 
 def _arc(radius: float, total_angle: float, n: int) -> np.ndarray:

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from estimation.field_library import OceanTemperatureField, QuadraticField, TwoChargesField
-from formation.level_curve import (
+from mobisense.estimation.fields.library import OceanTemperatureField, QuadraticField, TwoChargesField
+from mobisense.formation.level_curve import (
     LEVEL_FUNCTIONS,
     LevelCurveController,
     LinearLevel,
@@ -16,7 +16,7 @@ from formation.level_curve import (
     heading_error,
     heading_rate,
 )
-from formation.shape_control import perp
+from mobisense.formation.shape_control import perp
 
 FIELDS = {
     "two_charges": (
@@ -109,6 +109,7 @@ CASES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", CASES)
 def test_lyapunov_decreases_and_the_level_is_reached_with_true_derivatives(name):
     field, level, r0, v0, T = CASES[name]

@@ -7,11 +7,13 @@ import json
 import numpy as np
 import pytest
 import yaml
+from reference_problems import hussein2008
 from scipy.integrate import quad_vec
 
-from cli import main
-from estimation.field_library import QuadraticField
-from formation.ocp_replay import (
+from mobisense.cli import main
+from mobisense.core.config import ConfigError, parse_config
+from mobisense.estimation.fields.library import QuadraticField
+from mobisense.formation.replay.plan import (
     OcpReplayScenario,
     discretise_process,
     measurement_variances,
@@ -20,15 +22,14 @@ from formation.ocp_replay import (
     replay_solution,
     simulate_tracking,
 )
-from formation.ocp_replay_reference import ReferenceTrajectory, TrackingController, load_or_solve
-from formation.replay_results import replay_dataset, replay_summary
-from formation.replay_scenario import FieldReplayScenario
-from formation.replay_simulation import build_system, simulate
-from ocp.config import ConfigError, parse_config
-from ocp.direct import solve_direct, transcription_for
-from ocp.problem import Problem
-from ocp.simulate import integrate
-from tests.problems import hussein2008
+from mobisense.formation.replay.reference import ReferenceTrajectory, TrackingController, load_or_solve
+from mobisense.formation.replay.results import replay_dataset, replay_summary
+from mobisense.formation.replay.scenario import FieldReplayScenario
+from mobisense.formation.replay.simulation import build_system, simulate
+from mobisense.ocp.direct.solver import solve_direct
+from mobisense.ocp.direct.transcription import transcription_for
+from mobisense.ocp.problem import Problem
+from mobisense.ocp.simulate import integrate
 
 
 @pytest.fixture(scope="module")
@@ -52,6 +53,7 @@ def residual(reference: ReferenceTrajectory, solution) -> np.ndarray:
     return np.abs(reference(t)[2] - reference.acceleration(t)).max(axis=0)
 
 
+@pytest.mark.slow
 def test_replay_tracks_the_plan_within_the_feed_forward_residual(solution):
     """e'' + Kd e' + Kp e = u_ref − p_ref'' with Kd² = 4 Kp: the impulse response t e^{−ωt} ≥ 0 has L1 norm
     1/ω² = 1/Kp, so |e(t)| ≤ max|u_ref − p_ref''| / Kp per component (plus integrator error, 1e-8)."""
@@ -111,6 +113,7 @@ def riccati_along_plan(solution, times):
     return trajectory.x[:, :1, None]
 
 
+@pytest.mark.slow
 def test_sampled_filter_covariance_converges_to_the_riccati_solution_at_first_order(solution):
     reference = ReferenceTrajectory.from_solution(solution)
     errors = []
@@ -126,6 +129,7 @@ def test_sampled_filter_covariance_converges_to_the_riccati_solution_at_first_or
     assert errors[1] < 0.01
 
 
+@pytest.mark.slow
 def test_monte_carlo_errors_are_consistent_with_the_optimiser_prediction(solution):
     scenario = OcpReplayScenario(
         name="t", solution="s.nc", monte_carlo={"runs": 2000, "time_step": 0.02}, seed=5
@@ -155,6 +159,7 @@ def test_load_or_solve(tmp_path):
     assert solved.success and "solved" in note
 
 
+@pytest.mark.slow
 def test_cli_replays_a_solution_and_rejects_a_bad_offset(saved_solution, tmp_path, capsys):
     scenario = tmp_path / "replay.yaml"
     scenario.write_text(yaml.safe_dump({"name": "r", "solution": str(saved_solution),
@@ -174,6 +179,7 @@ def test_cli_replays_a_solution_and_rejects_a_bad_offset(saved_solution, tmp_pat
     assert not (tmp_path / "bad_out").exists()
 
 
+@pytest.mark.slow
 def test_formation_centre_tracks_the_optimised_path(saved_solution, solution, tmp_path):
     """OCP → control → estimation: a cross whose centre follows the plan over a quadratic field."""
     p0, v0 = solution.p[0, 0], solution.v[0, 0]

@@ -8,17 +8,19 @@ import numpy as np
 import pytest
 import yaml
 
-from estimation.field_library import QuadraticField
-from estimation.information_model import cross_formation
-from estimation.noise_config import CooperativeNoise
-from formation.level_curve import curvature_terms
-from formation.replay_estimation import ClosedLoopEstimator, WindowHessian
-from formation.replay_results import replay_dataset, replay_summary
-from formation.replay_scenario import FieldReplayScenario
-from formation.replay_simulation import build_system, simulate
-from ocp.config import parse_config
+from mobisense.core.config import parse_config
+from mobisense.estimation.cooperative.information_model import cross_formation
+from mobisense.estimation.cooperative.noise_config import CooperativeNoise
+from mobisense.estimation.fields.library import QuadraticField
+from mobisense.formation.level_curve import curvature_terms
+from mobisense.formation.replay.estimator import ClosedLoopEstimator, WindowHessian
+from mobisense.formation.replay.results import replay_dataset, replay_summary
+from mobisense.formation.replay.scenario import FieldReplayScenario
+from mobisense.formation.replay.simulation import build_system, simulate
 
-PROBLEMS = Path(__file__).resolve().parent.parent / "problems"
+pytestmark = pytest.mark.slow  # every test here runs solvers or subprocesses for seconds
+
+PROBLEMS = Path(__file__).resolve().parents[2] / "problems"
 
 
 def replay(name: str, **changes):

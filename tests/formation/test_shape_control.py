@@ -7,10 +7,10 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
-from estimation.information_model import rotation
-from formation.jacobi import JacobiTransform
-from formation.platforms import PlatformLimits
-from formation.shape_control import FixedShapeController, RotatingShapeController, perp, rotating_frame_state
+from mobisense.estimation.cooperative.information_model import rotation
+from mobisense.formation.jacobi import JacobiTransform
+from mobisense.formation.platforms import PlatformLimits
+from mobisense.formation.shape_control import FixedShapeController, RotatingShapeController, perp, rotating_frame_state
 
 # Integrations use rtol = atol = 1e-11 on O(1) states over a few time units: global errors ~1e-9;
 # every comparison with a closed form below allows 1e-8.

@@ -10,14 +10,16 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
+from reference_problems import hussein2008
 
-import cli
-from ocp.direct import solve_direct
-from ocp.engine import open_client, run_tasks
-from ocp.keypath import get_path, parse_key_path, set_path
-from ocp.problem import Problem
-from ocp.sweep import SweepSpec, expand_sweep
-from tests.problems import hussein2008
+from mobisense import cli
+from mobisense.core.keypath import get_path, parse_key_path, set_path
+from mobisense.ocp.batch.engine import open_client, run_tasks
+from mobisense.ocp.batch.sweep import SweepSpec, expand_sweep
+from mobisense.ocp.direct.solver import solve_direct
+from mobisense.ocp.problem import Problem
+
+pytestmark = pytest.mark.slow  # every test here runs solvers or subprocesses for seconds
 
 ALPHAS = [0.002, 0.004, 0.008]
 STARTS = [[10.0, 10.0], [10.0, -10.0], [8.0, 12.0]]
@@ -90,7 +92,7 @@ def test_grid_sweep_equals_single_solves_and_resumes(sweep_file, tmp_path, capsy
 
 
 def test_interrupted_sweep_resumes_without_recomputing(sweep_file, tmp_path, monkeypatch):
-    import ocp.command_sweep as command
+    import mobisense.ocp.batch.sweep_runner as command
 
     out = tmp_path / "out"
     real_write = command._write_rows

@@ -4,12 +4,20 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from reference_problems import (
+    coupled_two_sensor,
+    hussein2008,
+    scalar_steady_state,
+    sensor_at_rest,
+    two_scalar_processes,
+)
 
-from ocp.collocation import CollocationScheme
-from ocp.direct import _initial_guess, _state_grid, solve_direct, transcription_for
-from ocp.problem import Problem
-from ocp.simulate import integrate
-from tests.problems import coupled_two_sensor, hussein2008, scalar_steady_state, sensor_at_rest, two_scalar_processes
+from mobisense.ocp.collocation import CollocationScheme
+from mobisense.ocp.direct.guesses import initial_guess, state_grid
+from mobisense.ocp.direct.solver import solve_direct
+from mobisense.ocp.direct.transcription import transcription_for
+from mobisense.ocp.problem import Problem
+from mobisense.ocp.simulate import integrate
 
 
 def solve(data: dict) -> object:
@@ -28,17 +36,18 @@ def _sigma_error_at_tiny_eps(intervals: int) -> float:
     problem = Problem.from_dict(hussein2008(collocation={"intervals": intervals}, tolerance=1e-12))
     tr = transcription_for(problem)
     values = tr.layout.values(problem)
-    t_grid, order = _state_grid(tr, 0.0, 10.0)
+    t_grid, order = state_grid(tr, 0.0, 10.0)
     coasting = integrate(tr.model, tr.layout.pack(values), t_grid)
     values["cost_scale"] = coasting.cost
     P = tr.layout.pack({**values, "eps": 1e-10})
-    result = tr.solve(P, _initial_guess(tr, coasting, P))
+    result = tr.solve(P, initial_guess(tr, coasting, P))
     assert result.success
     parts = tr.unpack(result.w, P)
     x = np.concatenate([parts["xs"], parts["xc"].reshape(-1, tr.structure.nx)])[order]
     return float(np.abs(x[:, 0] - coasting.x[:, 0]).max())
 
 
+@pytest.mark.slow
 def test_tiny_eps_matches_riccati_ivp():
     # As ε → 0 the sensors coast and Σ solves the Riccati IVP. The remaining difference is the Radau IIA
     # (d = 3) stage error, O(h^(d+1)) = O(h^4) at the nodes: check its size (≤ 1e-6 of Σ0 = 200 at K = 100)
@@ -57,6 +66,7 @@ def test_sensor_at_rest_reaches_scalar_steady_state():
     assert solution.Sigma[-1, 0, 0] == pytest.approx(scalar_steady_state(-0.5, 1.0, r), rel=1e-9)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scheme,degree", [("radau", 2), ("radau", 3), ("legendre", 2), ("legendre", 3)])
 def test_cost_converges_at_scheme_order(scheme, degree):
     # With controls at the collocation points the cost converges at order 2d−1 (Radau) / 2d (Legendre).
@@ -76,6 +86,7 @@ def test_cost_converges_at_scheme_order(scheme, degree):
     assert orders[-1] > expected - 0.5, (errors, orders)
 
 
+@pytest.mark.slow
 def test_radau_and_legendre_agree(default_solution):
     legendre = solve(hussein2008(collocation={"scheme": "legendre"}, tolerance=1e-12))
     # both are O(h^5) or better at K = 100 (errors measured ≤ 1e-9)
@@ -93,6 +104,7 @@ def test_default_problem_improves_on_coasting(default_solution):
     assert s.baseline["cost"] == pytest.approx(fine.cost, rel=1e-9)
 
 
+@pytest.mark.slow
 def test_resimulated_control_reproduces_cost(default_solution):
     # Interpolate the optimal control on each interval (Lagrange through its d nodes) and integrate the
     # sensor + Riccati ODE with DOP853 (rtol 1e-11): J agrees to the collocation error (measured 5e-11).
@@ -111,6 +123,7 @@ def test_resimulated_control_reproduces_cost(default_solution):
     np.testing.assert_allclose(sim.x[-1, 1:3], s.p[-1, 0], atol=1e-5)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("axis", [0, 1])
 def test_initial_costate_is_cost_sensitivity(default_solution, axis):
     # λ_p(t0) = ∂J*/∂p0 (envelope theorem); central differences with δ = 1e-3 have O(δ²) truncation
@@ -134,6 +147,7 @@ def test_transversality(default_solution):
     assert np.abs(s.lam_v[-1]).max() < 1e-6 * np.abs(s.lam_v).max()
 
 
+@pytest.mark.slow
 def test_decoupled_problem_equals_two_scalar_problems():
     joint, first, second = (Problem.from_dict(d) for d in two_scalar_processes())
     sj, s0, s1 = solve_direct(joint), solve_direct(first), solve_direct(second)
@@ -146,6 +160,7 @@ def test_decoupled_problem_equals_two_scalar_problems():
     np.testing.assert_allclose(sj.p[:, 1], s1.p[:, 0], atol=1e-4)
 
 
+@pytest.mark.slow
 def test_coupled_problem_with_terminal_velocity():
     s = solve(coupled_two_sensor(terminal_velocity=True))
     np.testing.assert_allclose(s.v[-1, 0], [0.0, 0.0], atol=1e-9)
@@ -156,6 +171,7 @@ def test_coupled_problem_with_terminal_velocity():
     assert np.abs(free.v[-1, 0]).max() > 1e-3  # and it was active
 
 
+@pytest.mark.slow
 def test_control_bound_is_respected():
     data = hussein2008(collocation={"intervals": 60})
     data["sensors"][0]["u_max"] = 0.5
@@ -166,6 +182,7 @@ def test_control_bound_is_respected():
     assert s.cost >= unbounded.cost
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["adaptive", "none"])
 def test_homotopy_modes_reach_the_same_optimum(default_solution, mode):
     s = solve(hussein2008(homotopy={"mode": mode}, tolerance=1e-12))
@@ -175,7 +192,7 @@ def test_homotopy_modes_reach_the_same_optimum(default_solution, mode):
 
 
 def test_save_and_load_round_trip(default_solution, tmp_path):
-    from ocp.solution import Solution
+    from mobisense.ocp.solution import Solution
 
     default_solution.save(tmp_path)
     loaded = Solution.load(tmp_path / "solution.nc")
@@ -189,7 +206,7 @@ def test_save_and_load_round_trip(default_solution, tmp_path):
 
 def test_cvodes_coasting_equals_scipy_integration():
     # the compiled CVODES coasting solution (initial guess, baseline) against scipy's DOP853 at rtol 1e-12
-    from ocp.simulate import coast
+    from mobisense.ocp.simulate import coast
 
     problem = Problem.from_dict(coupled_two_sensor())
     tr = transcription_for(problem)

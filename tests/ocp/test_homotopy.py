@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from reference_problems import hussein2008
 
-from ocp.direct import solve_direct, transcription_for
-from ocp.homotopy import run_continuation
-from ocp.problem import HomotopyOptions, Problem
-from tests.problems import hussein2008
+from mobisense.ocp.direct.solver import solve_direct
+from mobisense.ocp.direct.transcription import transcription_for
+from mobisense.ocp.homotopy import run_continuation
+from mobisense.ocp.problem import HomotopyOptions, Problem
 
 
 def record(fail_above=None, fail_once_at=None):
@@ -59,6 +60,7 @@ def test_adaptive_gives_up_below_min_step():
     assert all(eps > 0.3 for eps in tried[-3:])
 
 
+@pytest.mark.slow
 def test_failure_mid_homotopy_keeps_last_solved_step(monkeypatch):
     problem = Problem.from_dict(hussein2008(collocation={"intervals": 40}, homotopy={"step": 0.25}))
     tr = transcription_for(problem)

@@ -5,17 +5,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from reference_problems import coupled_two_sensor, hussein2008, two_scalar_processes
 from scipy.integrate import solve_ivp
 
-from ocp.bvp_system import costate_matrix, hamiltonian_system
-from ocp.compare import agreement
-from ocp.config import ConfigError
-from ocp.direct import solve_direct
-from ocp.indirect import indirect_continuation, make_bvp_solver, refine_from_direct, solve_indirect
-from ocp.model import Structure
-from ocp.problem import Problem
-from ocp.simulate import integrate
-from tests.problems import coupled_two_sensor, hussein2008, two_scalar_processes
+from mobisense.core.config import ConfigError
+from mobisense.ocp.compare import agreement
+from mobisense.ocp.direct.solver import solve_direct
+from mobisense.ocp.indirect.hamiltonian import hamiltonian_system
+from mobisense.ocp.indirect.solver import indirect_continuation, make_bvp_solver, refine_from_direct, solve_indirect
+from mobisense.ocp.model import Structure
+from mobisense.ocp.problem import Problem
+from mobisense.ocp.simulate import integrate
 
 #: K-converged optimum of the default problem (direct Radau d = 3, K → ∞), from the issue tracker
 DEFAULT_OPTIMUM = 15.8477720354
@@ -131,7 +131,8 @@ def test_ad_costate_equations_equal_the_matrix_form_in_the_coupled_case():
 
     F = A - Sigma @ information(p)
     expected = -F.T @ Lam - Lam @ F - K
-    np.testing.assert_allclose(costate_matrix(lam_dot[:3], 2), expected, rtol=1e-12, atol=1e-12)
+    Lam_dot, _, _ = system.structure.state.split_costate(lam_dot)
+    np.testing.assert_allclose(Lam_dot, expected, rtol=1e-12, atol=1e-12)
 
     def hamiltonian_part(p_flat: np.ndarray) -> float:  # Tr[Λ Σ'] terms that depend on p: −Tr[Λ Σ S(p) Σ]
         return -np.trace(Lam @ Sigma @ information(p_flat.reshape(2, 2)) @ Sigma)
@@ -155,6 +156,7 @@ def test_control_bounds_are_rejected_at_validation():
 
 
 # ---------------------------------------------------------------------- the BVP solutions
+@pytest.mark.slow
 def test_continuation_reaches_eps_one_and_the_direct_optimum(default_indirect, default_direct):
     solution, _ = default_indirect
     # both discretisations (Radau d = 3, K = 100) carry ≈ 5e-11 relative error (cost order 2d − 1 = 5)
@@ -188,6 +190,7 @@ def _check_boundary_conditions(bvp, tolerance: float) -> None:
     assert (np.abs(mu[1:, -1]) / np.abs(mu[1:]).max(axis=1)).max() < tolerance
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("which", ["continuation (collocation)", "direct-seeded (scipy)"])
 def test_bvp_solution_satisfies_the_odes(which, default_indirect, default_seeded, default_problem):
     # Independent of the solvers: (1) re-simulate the Riccati + sensor ODE with solve_ivp (rtol 1e-12) under
@@ -252,6 +255,7 @@ def test_collocation_bvp_converges_at_the_scheme_order(default_indirect, default
     assert np.log2(errors[0] / errors[1]) > expected - 0.5, errors
 
 
+@pytest.mark.slow
 def test_direct_multiplier_costates_converge_to_the_pmp_costates(default_direct, default_seeded):
     # The direct method's costates (collocation multipliers / quadrature weights) are O(h^d) = O(h^3)
     # approximations of the PMP costates; the scipy BVP (tol 1e-8) is the reference. Measured: 1.6e-3
@@ -263,6 +267,7 @@ def test_direct_multiplier_costates_converge_to_the_pmp_costates(default_direct,
     assert np.log2(coarse / fine) > 2.5
 
 
+@pytest.mark.slow
 def test_two_sensors_with_a_fixed_terminal_velocity():
     # Coupled, correlated n = 2 process, two sensors, sensor s1 must stop at tf (λ_v(tf) free for s1 only).
     problem = Problem.from_dict(coupled_two_sensor(terminal_velocity=True))
@@ -286,6 +291,7 @@ def test_two_sensors_with_a_fixed_terminal_velocity():
     assert np.abs(indirect.lam_v[-1, 0]).max() > 1e-3 * np.abs(indirect.lam_v).max()  # the multiplier of v(tf) = 0
 
 
+@pytest.mark.slow
 def test_scipy_continuation_where_the_path_has_no_fold():
     # With α = 1 the solution curve is a graph over ε: natural-parameter steps of solve_bvp reach ε = 1 and
     # agree with the collocation solver within solve_bvp's tolerance 1e-8.
@@ -298,6 +304,7 @@ def test_scipy_continuation_where_the_path_has_no_fold():
     assert collocation.stats["indirect"]["folds"] == []
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["adaptive", "none"])
 def test_homotopy_modes_reach_the_same_optimum(default_indirect, mode):
     solution = solve_indirect(

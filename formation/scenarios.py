@@ -1,0 +1,119 @@
+"""Scenario files of the closed-loop simulations, behind one shape: load → :meth:`Scenario.run` → result.
+
+- ``field_replay`` (a ``field:`` key): :func:`~mobisense.formation.replay.runs.run_field_replay`;
+- ``plan_replay`` (a ``solution:`` key): :func:`~mobisense.formation.replay.runs.run_plan_replay`;
+- ``leader_follower`` (``mobisense simulate leader-follower``):
+  :func:`~mobisense.formation.leader_follower.runs.run_leader_follower`;
+- ``distributed`` (``mobisense simulate distributed``):
+  :func:`~mobisense.formation.distributed.simulation.run_distributed`.
+
+Example::
+
+    from mobisense import load_scenario
+    result = load_scenario("problems/replay_two_charges.yaml").run(seed=3)
+    result.save("out/two_charges")          # result.nc, figures, summary.json
+    ds = result.to_xarray()
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from mobisense.formation.simulation_result import SimulationResult
+
+__all__ = ["SCENARIO_KINDS", "Scenario", "load_scenario"]
+
+#: scenario kind -> "module:model class" of its file
+SCENARIO_KINDS: dict[str, str] = {
+    "field_replay": "mobisense.formation.replay.scenario:FieldReplayScenario",
+    "plan_replay": "mobisense.formation.replay.plan:OcpReplayScenario",
+    "leader_follower": "mobisense.formation.leader_follower.scenario:LeaderFollowerScenario",
+    "distributed": "mobisense.formation.distributed.simulation:DistributedScenario",
+}
+
+
+@dataclass
+class Scenario:
+    """A validated scenario file: its ``kind``, its model (``config``) and where it was read from."""
+
+    kind: str
+    config: Any
+    source: Path
+
+    def run(self, seed: int | None = None, progress: bool = False, animate: bool = False) -> SimulationResult:
+        """Simulate the scenario.
+
+        Parameters
+        ----------
+        seed : int, optional
+            Overrides the file's random seed.
+        progress : bool
+            Show a progress bar where the simulation has one.
+        animate : bool
+            Field replays: also write an animation when plotting.
+        """
+        if self.kind == "field_replay":
+            from mobisense.formation.replay.runs import run_field_replay
+
+            return run_field_replay(self.config, self.source, seed, progress=progress, animate=animate)
+        if self.kind == "plan_replay":
+            from mobisense.formation.replay.runs import run_plan_replay
+
+            return run_plan_replay(self.config, self.source, seed)
+        if self.kind == "leader_follower":
+            from mobisense.formation.leader_follower.runs import run_leader_follower
+
+            return run_leader_follower(self.config, seed, source=self.source)
+        from mobisense.formation.distributed.simulation import run_distributed
+
+        return run_distributed(self.config, seed, progress=progress)
+
+
+def _model(kind: str) -> Any:
+    import importlib
+
+    module_name, _, name = SCENARIO_KINDS[kind].partition(":")
+    return getattr(importlib.import_module(module_name), name)
+
+
+def replay_kind(data: Any, source: Path) -> str:
+    """``field_replay`` or ``plan_replay`` from the keys of a replay file; ``ConfigError`` if neither."""
+    from mobisense.core.config import ConfigError
+
+    if isinstance(data, dict) and "field" in data:
+        return "field_replay"
+    if isinstance(data, dict) and "solution" in data:
+        return "plan_replay"
+    raise ConfigError(
+        f"{source}: (top level): expected a field replay (key 'field') or a replay of an optimised "
+        "solution (key 'solution')"
+    )
+
+
+def load_scenario(path: str | Path, kind: str | None = None) -> Scenario:
+    """Read and validate a scenario file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The YAML file.
+    kind : str, optional
+        One of :data:`SCENARIO_KINDS`, or ``"replay"`` (default) to tell a field replay from a plan
+        replay by its keys.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the file and the key path.
+    """
+    from mobisense.core.config import ConfigError, parse_config, read_yaml
+
+    path = Path(path)
+    data = read_yaml(path)
+    if kind is None or kind == "replay":
+        kind = replay_kind(data, path)
+    if kind not in SCENARIO_KINDS:
+        raise ConfigError(f"{path}: unknown scenario kind {kind!r}; expected one of {sorted(SCENARIO_KINDS)}")
+    return Scenario(kind, parse_config(data, _model(kind), source=str(path)), path)

@@ -1,0 +1,73 @@
+"""The one shape of every closed-loop simulation's outcome: a dataset, a summary, its figures.
+
+A scenario runs (:func:`mobisense.formation.scenarios.load_scenario` → :meth:`Scenario.run`) into a
+:class:`SimulationResult`: ``to_xarray()`` is the data (``result.nc``), ``summary`` the headline numbers
+(``summary.json``), ``plot(folder)`` writes the figures and ``save(folder)`` writes all three atomically.
+Each simulation subclasses it with its own figures and console report.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+__all__ = ["SimulationResult"]
+
+
+class SimulationResult:
+    """Outcome of one closed-loop simulation.
+
+    Parameters
+    ----------
+    dataset : xarray.Dataset
+        Everything simulated, on its time axis (written as ``result.nc``).
+    summary : dict
+        Plain-JSON headline numbers (written as ``summary.json``, with the list of files written).
+    """
+
+    #: what kind of simulation produced the result (``summary.json`` key ``kind`` where it has none)
+    kind: str = "simulation"
+
+    def __init__(self, dataset: Any, summary: dict[str, Any]) -> None:
+        self.dataset = dataset
+        self.summary = summary
+
+    def to_xarray(self) -> Any:
+        """The simulated data as an ``xarray.Dataset``."""
+        return self.dataset
+
+    def plot(self, folder: str | Path) -> list[Path]:
+        """Write the figures into ``folder``; return their paths (none by default)."""
+        return []
+
+    def extra_files(self, folder: Path) -> list[Path]:
+        """Files beyond ``result.nc``, figures and ``summary.json`` that :meth:`save` writes (none by default)."""
+        return []
+
+    def save(self, folder: str | Path, figures: bool = True) -> list[Path]:
+        """Write ``result.nc``, the figures (unless ``figures=False``) and ``summary.json`` into ``folder``.
+
+        Every file is written atomically; ``summary.json`` last, listing the files written.
+        """
+        from mobisense.core.files import write_json, write_netcdf
+
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        write_netcdf(folder / "result.nc", self.dataset)
+        written = [folder / "result.nc", folder / "summary.json"]
+        written += self.extra_files(folder)
+        if figures:
+            written += self.plot(folder)
+        self.summary["files"] = [p.name for p in written]
+        write_json(folder / "summary.json", self.summary)
+        return written
+
+    def report(self, folder: Path) -> None:
+        """Print the headline numbers to the terminal (after :meth:`save`)."""
+        print(f"results in {folder}/: {', '.join(self.summary.get('files', []))}")
+
+    def __repr__(self) -> str:
+        dims = ", ".join(f"{k}={v}" for k, v in dict(self.dataset.sizes).items())
+        keys = ", ".join(list(self.summary)[:8])
+        variables = len(self.dataset.data_vars)
+        return f"{type(self).__name__}(dataset: {variables} variables over {dims}; summary: {keys}, …)"

@@ -1,0 +1,56 @@
+"""The worker side of a batch: solve one task given as plain data, return plain data.
+
+A task is ``{problem: dict, seed: NLP point or None, guess_seed: int or None}``; the worker builds (or
+reuses, per process) the transcription of the problem's structure and returns the result row, the
+solution as an ``xarray.Dataset`` and the converged NLP point (to warm-start neighbours).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+__all__ = ["solve_task", "worker_name"]
+
+
+def solve_task(payload: dict[str, Any]) -> dict[str, Any]:
+    """Worker side: solve one task. ``payload`` = {problem, seed (NLP point or None), guess_seed (int|None)}."""
+    from mobisense.ocp.direct.solver import solve_direct
+    from mobisense.ocp.direct.transcription import transcription_cache_hits
+    from mobisense.ocp.problem import Problem
+    from mobisense.ocp.solution import StartKind
+
+    t0 = time.perf_counter()
+    hits = transcription_cache_hits()
+    problem = Problem.from_dict(payload["problem"], source="task")
+    guess = None
+    if payload.get("guess_seed") is not None:
+        from mobisense.ocp.direct.guesses import random_guess
+
+        guess = random_guess(problem, payload["guess_seed"])
+    solution = solve_direct(problem, init=payload.get("seed"), guess=guess)
+    cached = transcription_cache_hits() > hits
+    row = {
+        "status": solution.status,
+        "cost": solution.cost,
+        "terminal_cost": solution.terminal_cost,
+        "running_cost": solution.running_cost,
+        "iterations": int(sum(s.iterations for s in solution.homotopy)),
+        "time_s": time.perf_counter() - t0,
+        "solve_time_s": float(sum(s.time_s for s in solution.homotopy)),
+        "worker": worker_name(),
+        "error": "" if solution.success else solution.message,
+        "start": StartKind(solution.stats.get("start", StartKind.CONTINUATION)).value,
+        "transcription_cached": cached,
+    }
+    return {"row": row, "dataset": solution.to_dataset(), "nlp": solution.nlp if solution.success else None}
+
+
+def worker_name() -> str:
+    """The dask worker this runs on, or ``"local"`` outside a worker."""
+    try:
+        from dask.distributed import get_worker
+
+        return str(get_worker().name)
+    except (ImportError, ValueError):
+        return "local"

@@ -1,0 +1,20 @@
+"""Direct collocation of the mobile-sensor problem: the NLP transcription and the ε-continuation driver."""
+
+from mobisense.core.lazy import lazy_exports
+
+__getattr__, __dir__, __all__ = lazy_exports(
+    __name__,
+    {
+        "solve_direct": "mobisense.ocp.direct.solver",
+        "DirectCollocation": "mobisense.ocp.direct.transcription",
+        "NLPResult": "mobisense.ocp.direct.transcription",
+        "IPOPT_DEFAULTS": "mobisense.ocp.direct.transcription",
+        "transcription_for": "mobisense.ocp.direct.transcription",
+        "transcription_cache_hits": "mobisense.ocp.direct.transcription",
+        "initial_guess": "mobisense.ocp.direct.guesses",
+        "state_grid": "mobisense.ocp.direct.guesses",
+        "coasting_baseline": "mobisense.ocp.direct.guesses",
+        "random_guess": "mobisense.ocp.direct.guesses",
+        "clear_transcription_cache": "mobisense.ocp.direct.transcription",
+    },
+)

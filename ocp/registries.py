@@ -1,0 +1,73 @@
+"""The named choices of an optimal-control problem file, each listed once.
+
+The YAML schema (:mod:`mobisense.ocp.problem`), the command-line ``choices`` (:mod:`mobisense.ocp.commands`)
+and the code that dispatches on a name all read these registries, so a solver, scheme or noise model
+registered here (or by an installed package, for noise models through the ``mobisense.noise_models``
+entry-point group) can be chosen from a problem file and from the command line.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from mobisense.core.registry import Lazy, Registry
+
+__all__ = [
+    "METHODS",
+    "SCHEMES",
+    "HOMOTOPY_MODES",
+    "BVP_SOLVERS",
+    "NOISE_MODELS",
+    "MethodName",
+    "SchemeName",
+    "HomotopyModeName",
+    "BVPSolverName",
+]
+
+#: solver.method -> function ``(problem, progress=None, init=None) -> Solution``
+METHODS: Registry[Any] = Registry(
+    "method",
+    {
+        "direct": Lazy("mobisense.ocp.direct.solver:solve_direct"),
+        "indirect": Lazy("mobisense.ocp.indirect.solver:solve_indirect"),
+        "both": Lazy("mobisense.ocp.compare:solve_both"),
+    },
+)
+
+#: solver.collocation.scheme -> CasADi collocation point set (``casadi.collocation_points``)
+SCHEMES: Registry[str] = Registry("collocation scheme", {"radau": "radau", "legendre": "legendre"})
+
+#: solver.homotopy.mode -> continuation driver ``(attempt, options) -> last ε solved``
+HOMOTOPY_MODES: Registry[Any] = Registry(
+    "homotopy mode",
+    {
+        "fixed": Lazy("mobisense.ocp.homotopy:fixed_continuation"),
+        "adaptive": Lazy("mobisense.ocp.homotopy:adaptive_continuation"),
+        "none": Lazy("mobisense.ocp.homotopy:direct_to_one"),
+    },
+)
+
+#: solver.bvp.solver and solver.bvp.refine_solver -> :class:`mobisense.ocp.indirect.bvp_solvers.BVPSolver`
+BVP_SOLVERS: Registry[Any] = Registry(
+    "BVP solver",
+    {
+        "collocation": Lazy("mobisense.ocp.indirect.bvp_solvers:CollocationBVP"),
+        "scipy": Lazy("mobisense.ocp.indirect.bvp_solvers:ScipyBVP"),
+    },
+)
+
+#: sensors[i].noise.model -> :class:`mobisense.ocp.noise_models.NoiseModel` subclass
+NOISE_MODELS: Registry[Any] = Registry(
+    "noise model",
+    {
+        "quadratic_range": Lazy("mobisense.ocp.noise_models:QuadraticRange"),
+        "constant": Lazy("mobisense.ocp.noise_models:ConstantNoise"),
+    },
+    entry_point_group="mobisense.noise_models",
+)
+
+# the pydantic types of the schema fields that name an entry (validated against the registry at read time)
+MethodName = METHODS.choice()
+SchemeName = SCHEMES.choice()
+HomotopyModeName = HOMOTOPY_MODES.choice()
+BVPSolverName = BVP_SOLVERS.choice()
