@@ -29,7 +29,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 __version__ = "0.2.0"
 
-from mobisense.core.lazy import lazy_exports  # noqa: E402  (after the environment is set)
+from .core.lazy import lazy_exports  # noqa: E402  (after the environment is set)
 
 __getattr__, __dir__, _names = lazy_exports(
     __name__,

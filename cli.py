@@ -15,7 +15,7 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-from mobisense import __version__
+from . import __version__
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
@@ -51,7 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (also used by ``python -m``/console script)."""
-    from mobisense.core.config import ConfigError
+    from .core.config import ConfigError
 
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()

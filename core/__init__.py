@@ -1,6 +1,6 @@
 """Plumbing every package may use: validated configuration files, registries, key paths, atomic outputs."""
 
-from mobisense.core.lazy import lazy_exports
+from .lazy import lazy_exports
 
 __getattr__, __dir__, __all__ = lazy_exports(
     __name__,

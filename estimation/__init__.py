@@ -7,7 +7,7 @@ Layout: :mod:`~mobisense.estimation.kalman` (the predict/update kernels every fi
 (sensor meshes, the finite-volume PDE constraint, the distributed constrained filter).
 """
 
-from mobisense.core.lazy import lazy_exports
+from ..core.lazy import lazy_exports
 
 __getattr__, __dir__, __all__ = lazy_exports(
     __name__,

@@ -27,9 +27,9 @@ class SteadyStateCommand:
     @staticmethod
     def run(args: argparse.Namespace) -> int:
         """Validate, design, write ``summary.json``, ``trace_grid.nc`` and ``trace_contour.png``."""
-        from mobisense.core.config import load_config
-        from mobisense.core.output import default_output_folder
-        from mobisense.estimation.cooperative.design_study import FormationFile, design_formation
+        from ..core.config import load_config
+        from ..core.output import default_output_folder
+        from .cooperative.design_study import FormationFile, design_formation
 
         config = load_config(args.formation, FormationFile)  # ConfigError -> exit 2, nothing written
         out = args.out if args.out is not None else default_output_folder(args.formation)

@@ -8,7 +8,7 @@ Layout: :mod:`~mobisense.formation.jacobi`, :mod:`~mobisense.formation.shape_con
 :mod:`~mobisense.formation.scenarios` (every simulation behind one shape: load → run → result).
 """
 
-from mobisense.core.lazy import lazy_exports
+from ..core.lazy import lazy_exports
 
 __getattr__, __dir__, __all__ = lazy_exports(
     __name__,

@@ -61,8 +61,8 @@ class ReplayCommand:
     @staticmethod
     def run(args: argparse.Namespace) -> int:
         """Validate, replay, write the outputs; return the exit status."""
-        from mobisense.formation.replay.simulation import ReplayError
-        from mobisense.formation.scenarios import load_scenario
+        from .replay.simulation import ReplayError
+        from .scenarios import load_scenario
 
         scenario = load_scenario(args.scenario, "replay")
         progress = not args.quiet and sys.stderr.isatty()
@@ -89,8 +89,8 @@ class SimulateCommand:
     @staticmethod
     def run(args: argparse.Namespace) -> int:
         """Validate, simulate, write the outputs; return the exit status."""
-        from mobisense.formation.leader_follower.controls import FormationSingularityError
-        from mobisense.formation.scenarios import load_scenario
+        from .leader_follower.controls import FormationSingularityError
+        from .scenarios import load_scenario
 
         scenario = load_scenario(args.scenario, SIMULATION_KINDS[args.kind])
         try:
@@ -106,7 +106,7 @@ class SimulateCommand:
 
 
 def _save(result: object, args: argparse.Namespace, source: Path) -> int:
-    from mobisense.core.output import default_output_folder
+    from ..core.output import default_output_folder
 
     out = args.out if args.out is not None else default_output_folder(source)
     result.save(out, figures=not args.no_plot)  # type: ignore[attr-defined]

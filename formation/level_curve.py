@@ -33,9 +33,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mobisense.core.registry import Registry
-from mobisense.estimation.fields.base import level_curve_frame
-from mobisense.formation.shape_control import perp
+from ..core.registry import Registry
+from ..estimation.fields.base import level_curve_frame
+from .shape_control import perp
 
 __all__ = [
     "LevelFunction",

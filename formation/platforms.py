@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mobisense.core.config import PositiveFloat, StrictModel
+from ..core.config import PositiveFloat, StrictModel
 
 __all__ = ["PlatformLimits", "PlatformLimitsConfig", "newton_rates"]
 

@@ -9,7 +9,7 @@
 
 Example::
 
-    from mobisense import load_scenario
+    from .. import load_scenario
     result = load_scenario("problems/replay_two_charges.yaml").run(seed=3)
     result.save("out/two_charges")          # result.nc, figures, summary.json
     ds = result.to_xarray()
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mobisense.formation.simulation_result import SimulationResult
+from .simulation_result import SimulationResult
 
 __all__ = ["SCENARIO_KINDS", "Scenario", "load_scenario"]
 
@@ -55,18 +55,18 @@ class Scenario:
             Field replays: also write an animation when plotting.
         """
         if self.kind == "field_replay":
-            from mobisense.formation.replay.runs import run_field_replay
+            from .replay.runs import run_field_replay
 
             return run_field_replay(self.config, self.source, seed, progress=progress, animate=animate)
         if self.kind == "plan_replay":
-            from mobisense.formation.replay.runs import run_plan_replay
+            from .replay.runs import run_plan_replay
 
             return run_plan_replay(self.config, self.source, seed)
         if self.kind == "leader_follower":
-            from mobisense.formation.leader_follower.runs import run_leader_follower
+            from .leader_follower.runs import run_leader_follower
 
             return run_leader_follower(self.config, seed, source=self.source)
-        from mobisense.formation.distributed.simulation import run_distributed
+        from .distributed.simulation import run_distributed
 
         return run_distributed(self.config, seed, progress=progress)
 
@@ -80,7 +80,7 @@ def _model(kind: str) -> Any:
 
 def replay_kind(data: Any, source: Path) -> str:
     """``field_replay`` or ``plan_replay`` from the keys of a replay file; ``ConfigError`` if neither."""
-    from mobisense.core.config import ConfigError
+    from ..core.config import ConfigError
 
     if isinstance(data, dict) and "field" in data:
         return "field_replay"
@@ -108,7 +108,7 @@ def load_scenario(path: str | Path, kind: str | None = None) -> Scenario:
     ConfigError
         One line naming the file and the key path.
     """
-    from mobisense.core.config import ConfigError, parse_config, read_yaml
+    from ..core.config import ConfigError, parse_config, read_yaml
 
     path = Path(path)
     data = read_yaml(path)

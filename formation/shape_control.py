@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mobisense.estimation.cooperative.information_model import rotation
+from ..estimation.cooperative.information_model import rotation
 
 __all__ = [
     "perp",

@@ -49,7 +49,7 @@ class SimulationResult:
 
         Every file is written atomically; ``summary.json`` last, listing the files written.
         """
-        from mobisense.core.files import write_json, write_netcdf
+        from ..core.files import write_json, write_netcdf
 
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)

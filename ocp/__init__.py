@@ -7,7 +7,7 @@ Layout: :mod:`~mobisense.ocp.problem` (the YAML schema), :mod:`~mobisense.ocp.mo
 :mod:`~mobisense.ocp.registries` (the named choices of a problem file).
 """
 
-from mobisense.core.lazy import lazy_exports
+from ..core.lazy import lazy_exports
 
 __getattr__, __dir__, __all__ = lazy_exports(
     __name__,

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from mobisense.ocp.registries import SCHEMES
+from .registries import SCHEMES
 
 __all__ = ["CollocationScheme"]
 

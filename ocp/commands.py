@@ -21,7 +21,7 @@ class SolveCommand:
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser) -> None:
         """Add the ``solve`` arguments."""
-        from mobisense.ocp.registries import HOMOTOPY_MODES, METHODS, SCHEMES
+        from .registries import HOMOTOPY_MODES, METHODS, SCHEMES
 
         parser.add_argument("problem", type=Path, help="problem YAML file (see problems/hussein2008.yaml)")
         parser.add_argument("--out", type=Path, default=None, help="output folder (default: out/<file name>)")
@@ -51,10 +51,10 @@ class SolveCommand:
     @staticmethod
     def run(args: argparse.Namespace) -> int:
         """Validate, solve, write outputs; exit 0 (solved), 1 (solver failure, partial results kept), 2 (bad input)."""
-        from mobisense.core.config import ConfigError, read_yaml
-        from mobisense.core.output import default_output_folder
-        from mobisense.ocp.problem import Problem
-        from mobisense.ocp.reporting import SolveReporter
+        from ..core.config import ConfigError, read_yaml
+        from ..core.output import default_output_folder
+        from .problem import Problem
+        from .reporting import SolveReporter
 
         data = apply_overrides(read_yaml(args.problem), args)
         problem = Problem.from_dict(data, source=str(args.problem))  # ConfigError -> exit 2, nothing written
@@ -63,14 +63,14 @@ class SolveCommand:
         if args.multistart is not None:
             if args.multistart < 1 or problem.solver.method != "direct":
                 raise ConfigError(f"{args.problem}: --multistart: expected K >= 1 with solver.method 'direct'")
-            from mobisense.ocp.batch.multistart import solve_multistart
+            from .batch.multistart import solve_multistart
 
             solution = solve_multistart(problem, args.multistart, args.scheduler, args.workers)
         else:
             solution = reporter.run(problem.solver.method)
         solution.save(out)
         if not args.no_plot:
-            from mobisense.ocp.plots import save_figures
+            from .plots import save_figures
 
             save_figures(solution, out)
         reporter.report(solution, out)
@@ -111,7 +111,7 @@ class ValidateCommand:
     @staticmethod
     def run(args: argparse.Namespace) -> int:
         """Validate each file; print a one-line description of each valid problem."""
-        from mobisense.ocp.problem import load_problem
+        from .problem import load_problem
 
         for path in args.files:
             problem = load_problem(path)  # ConfigError -> exit 2 with file and key path
@@ -149,8 +149,8 @@ class SweepCommand:
     @staticmethod
     def run(args: argparse.Namespace) -> int:
         """Validate the whole sweep, then run the tasks not finished before; write rows as they complete."""
-        from mobisense.core.output import default_output_folder
-        from mobisense.ocp.batch.sweep_runner import run_sweep
+        from ..core.output import default_output_folder
+        from .batch.sweep_runner import run_sweep
 
         out = args.out if args.out is not None else default_output_folder(args.sweep)
         result = run_sweep(

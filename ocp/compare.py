@@ -23,14 +23,14 @@ from typing import Any
 
 import numpy as np
 
-from mobisense.ocp.direct.solver import solve_direct
-from mobisense.ocp.indirect.bvp_solvers import BVPSolution
-from mobisense.ocp.indirect.hamiltonian import hamiltonian_system
-from mobisense.ocp.indirect.residuals import optimality_residuals
-from mobisense.ocp.indirect.solver import indirect_continuation, refine_from_direct, solution_from_bvp
-from mobisense.ocp.model import Structure
-from mobisense.ocp.problem import Problem
-from mobisense.ocp.solution import HomotopyStep, Solution
+from .direct.solver import solve_direct
+from .indirect.bvp_solvers import BVPSolution
+from .indirect.hamiltonian import hamiltonian_system
+from .indirect.residuals import optimality_residuals
+from .indirect.solver import indirect_continuation, refine_from_direct, solution_from_bvp
+from .model import Structure
+from .problem import Problem
+from .solution import HomotopyStep, Solution
 
 __all__ = ["ComparedSolution", "agreement", "solve_both"]
 

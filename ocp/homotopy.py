@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from mobisense.ocp.problem import HomotopyOptions
-from mobisense.ocp.registries import HOMOTOPY_MODES
+from .problem import HomotopyOptions
+from .registries import HOMOTOPY_MODES
 
 __all__ = ["run_continuation", "fixed_schedule", "fixed_continuation", "adaptive_continuation", "direct_to_one"]
 

@@ -15,9 +15,9 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from mobisense.ocp.problem import Problem
-from mobisense.ocp.registries import NOISE_MODELS
-from mobisense.ocp.state_layout import StateLayout
+from .problem import Problem
+from .registries import NOISE_MODELS
+from .state_layout import StateLayout
 
 __all__ = ["Structure", "ParameterLayout", "SensorKalmanModel"]
 

@@ -31,8 +31,8 @@ from typing import Any, ClassVar, Literal
 
 import casadi as ca
 
-from mobisense.core.config import PositiveFloat, StrictModel
-from mobisense.ocp.registries import NOISE_MODELS
+from ..core.config import PositiveFloat, StrictModel
+from .registries import NOISE_MODELS
 
 __all__ = ["NoiseModel", "QuadraticRange", "ConstantNoise", "register_noise_model", "parse_noise"]
 

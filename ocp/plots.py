@@ -7,9 +7,9 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from mobisense.core.files import write_figure
-from mobisense.ocp.registries import NOISE_MODELS
-from mobisense.ocp.solution import Solution
+from ..core.files import write_figure
+from .registries import NOISE_MODELS
+from .solution import Solution
 
 __all__ = ["effective_noise", "plot_paths", "plot_covariance", "plot_controls", "plot_homotopy", "save_figures"]
 

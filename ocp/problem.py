@@ -26,7 +26,7 @@ from typing import Annotated, Any
 import numpy as np
 from pydantic import BeforeValidator, Field, SerializeAsAny, model_validator
 
-from mobisense.core.config import (
+from ..core.config import (
     FiniteFloat,
     InvalidValue,
     Matrix,
@@ -40,8 +40,8 @@ from mobisense.core.config import (
     load_config,
     parse_config,
 )
-from mobisense.ocp.noise_models import NoiseModel, parse_noise
-from mobisense.ocp.registries import BVPSolverName, HomotopyModeName, MethodName, SchemeName
+from .noise_models import NoiseModel, parse_noise
+from .registries import BVPSolverName, HomotopyModeName, MethodName, SchemeName
 
 __all__ = [
     "Horizon",

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from mobisense.core.registry import Lazy, Registry
+from ..core.registry import Lazy, Registry
 
 __all__ = [
     "METHODS",

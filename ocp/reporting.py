@@ -9,10 +9,10 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from mobisense.ocp.homotopy import fixed_schedule
-from mobisense.ocp.problem import Problem
-from mobisense.ocp.solution import HomotopyStep, Solution
-from mobisense.ocp.solving import solve
+from .homotopy import fixed_schedule
+from .problem import Problem
+from .solution import HomotopyStep, Solution
+from .solving import solve
 
 __all__ = ["SolveReporter"]
 

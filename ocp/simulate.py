@@ -14,7 +14,7 @@ import casadi as ca
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from mobisense.ocp.model import SensorKalmanModel
+from .model import SensorKalmanModel
 
 __all__ = ["Trajectory", "integrate", "coast"]
 

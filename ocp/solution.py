@@ -18,9 +18,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from mobisense.core.files import to_jsonable, write_json, write_netcdf
-from mobisense.ocp.problem import Problem
-from mobisense.ocp.state_layout import StateLayout
+from ..core.files import to_jsonable, write_json, write_netcdf
+from .problem import Problem
+from .state_layout import StateLayout
 
 __all__ = ["SolveStatus", "StartKind", "HomotopyStep", "TrajectorySample", "Solution"]
 
@@ -338,7 +338,7 @@ class Solution:
         return TrajectorySample(times, Sigma, p, v, u_t.reshape(len(times), self.problem.N, 2))
 
     def _sample_collocation(self, times: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        from mobisense.ocp.collocation import CollocationScheme
+        from .collocation import CollocationScheme
 
         scheme, degree, K = self.collocation  # type: ignore[misc]
         colloc = CollocationScheme(scheme, degree)

@@ -6,10 +6,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from mobisense.core.config import ConfigError
-from mobisense.ocp.problem import Problem, load_problem
-from mobisense.ocp.registries import METHODS
-from mobisense.ocp.solution import HomotopyStep, Solution
+from ..core.config import ConfigError
+from .problem import Problem, load_problem
+from .registries import METHODS
+from .solution import HomotopyStep, Solution
 
 __all__ = ["solve"]
 

@@ -46,12 +46,24 @@ def _modules() -> dict[str, Path]:
 MODULES = _modules()
 
 
+def _package_of(path: Path) -> str:
+    """The dotted package a file belongs to (``mobisense.ocp.direct`` for ``ocp/direct/solver.py``)."""
+    name = _module_name(path)
+    return name if path.name == "__init__.py" else name.rpartition(".")[0]
+
+
 def _imports(path: Path) -> list[tuple[str, str]]:
-    """(module imported, name imported or '') for every import statement of a file."""
+    """(absolute module imported, name imported or '') for every import statement of a file."""
     out = []
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-        if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            out += [(node.module, alias.name) for alias in node.names]
+        if isinstance(node, ast.ImportFrom):
+            if node.level:  # relative: resolve against the file's package
+                base = _package_of(path).split(".")
+                base = base[: len(base) - (node.level - 1)]
+                module = ".".join(base + ([node.module] if node.module else []))
+            else:
+                module = node.module or ""
+            out += [(module, alias.name) for alias in node.names]
         elif isinstance(node, ast.Import):
             out += [(alias.name, "") for alias in node.names]
     return out

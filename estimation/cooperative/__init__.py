@@ -1,6 +1,6 @@
 """Cooperative exploration: information model, cooperative and coloured filters, Hessians, steady-state design."""
 
-from mobisense.core.lazy import lazy_exports
+from ...core.lazy import lazy_exports
 
 __getattr__, __dir__, __all__ = lazy_exports(
     __name__,

@@ -26,17 +26,17 @@ from typing import Literal
 
 import numpy as np
 
-from mobisense.estimation import kalman
-from mobisense.estimation.cooperative.filter import CooperativeFilterResult, check_filter_inputs
-from mobisense.estimation.cooperative.information_model import (
+from .. import kalman
+from .filter import CooperativeFilterResult, check_filter_inputs
+from .information_model import (
     formation_center,
     hessian_drift,
     hessian_to_vec,
     taylor_matrices,
     transition_matrix,
 )
-from mobisense.estimation.cooperative.noise_config import CooperativeNoise
-from mobisense.estimation.cooperative.spatial_noise import SpatialNoise
+from .noise_config import CooperativeNoise
+from .spatial_noise import SpatialNoise
 
 __all__ = ["run_coloured_filter"]
 

@@ -22,8 +22,8 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import model_validator
 
-from mobisense.core.config import InvalidValue, PositiveFloat, StrictModel, Vector2, load_config
-from mobisense.estimation.cooperative.noise_config import NoiseConfig
+from ...core.config import InvalidValue, PositiveFloat, StrictModel, Vector2, load_config
+from .noise_config import NoiseConfig
 
 __all__ = ["FormationFile", "ShapeBounds", "DesignStudy", "design_formation"]
 
@@ -92,7 +92,7 @@ class DesignStudy:
         """``trace_contour.png``: tr P∞ over (a, b) with the optimum (nothing for a custom shape)."""
         if self.grid is None:
             return []
-        from mobisense.core.files import write_figure
+        from ...core.files import write_figure
 
         path = Path(folder) / "trace_contour.png"
         write_figure(path, lambda: _contour_figure(self.grid, self.design, self.config))
@@ -100,7 +100,7 @@ class DesignStudy:
 
     def save(self, folder: str | Path, figures: bool = True) -> list[Path]:
         """Write ``summary.json``, ``trace_grid.nc`` and (unless ``figures=False``) the contour plot."""
-        from mobisense.core.files import write_json, write_netcdf
+        from ...core.files import write_json, write_netcdf
 
         folder = Path(folder)
         write_json(folder / "summary.json", self.summary)
@@ -130,7 +130,7 @@ def design_formation(config: FormationFile | str | Path) -> DesignStudy:
 
 
 def _custom_summary(config: FormationFile) -> dict:
-    from mobisense.estimation.cooperative.steady_state import steady_state
+    from .steady_state import steady_state
 
     noise = config.noise.to_noise()
     result = steady_state(np.asarray(config.positions, dtype=float), noise)
@@ -154,7 +154,7 @@ def _bounds(config: FormationFile) -> tuple[tuple[float, float], tuple[float, fl
 
 
 def _cross_summary(config: FormationFile) -> tuple[dict, object]:
-    from mobisense.estimation.cooperative.formation_design import design_cross_formation
+    from .formation_design import design_cross_formation
 
     n, bounds = config.noise, _bounds(config)
     design = design_cross_formation(n.sigma_process, n.sigma_measurement, n.sigma_hessian, bounds, config.equal_sides)
@@ -182,7 +182,7 @@ def _cross_summary(config: FormationFile) -> tuple[dict, object]:
 def _trace_grid(config: FormationFile) -> object:
     import xarray as xr
 
-    from mobisense.estimation.cooperative.steady_state import cross_trace
+    from .steady_state import cross_trace
 
     (a_min, a_max), (b_min, b_max) = _bounds(config)
     a = np.linspace(a_min, a_max, config.contour_resolution)

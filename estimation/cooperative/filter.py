@@ -42,15 +42,15 @@ from typing import Any, Literal, Protocol
 
 import numpy as np
 
-from mobisense.estimation import kalman
-from mobisense.estimation.cooperative.information_model import (
+from .. import kalman
+from .information_model import (
     formation_center,
     hessian_drift,
     hessian_to_vec,
     taylor_matrices,
     transition_matrix,
 )
-from mobisense.estimation.cooperative.noise_config import CooperativeNoise
+from .noise_config import CooperativeNoise
 
 __all__ = [
     "HessianSource",

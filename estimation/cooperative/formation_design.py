@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 from scipy.optimize import OptimizeResult
 
-from mobisense.estimation.cooperative.noise_config import CooperativeNoise
-from mobisense.estimation.cooperative.steady_state import cross_steady_state, cross_trace_function
+from .noise_config import CooperativeNoise
+from .steady_state import cross_steady_state, cross_trace_function
 
 __all__ = ["ShapeDesign", "minimise_shape", "design_cross_formation", "adaptive_shape_step", "cross_taylor_symbolic"]
 

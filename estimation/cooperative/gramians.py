@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from mobisense.estimation.cooperative.information_model import formation_center, taylor_matrices, transition_matrix
-from mobisense.estimation.cooperative.noise_config import CooperativeNoise
+from .information_model import formation_center, taylor_matrices, transition_matrix
+from .noise_config import CooperativeNoise
 
 __all__ = ["Gramians", "gramians"]
 

@@ -32,10 +32,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mobisense.estimation.cooperative.information_model import hessian_to_vec, relative_positions, taylor_matrices
-from mobisense.estimation.cooperative.noise_config import CooperativeNoise
-from mobisense.estimation.cooperative.spatial_noise import SpatialNoise
-from mobisense.estimation.fields.base import level_curve_frame
+from ..fields.base import level_curve_frame
+from .information_model import hessian_to_vec, relative_positions, taylor_matrices
+from .noise_config import CooperativeNoise
+from .spatial_noise import SpatialNoise
 
 __all__ = [
     "one_step_filter",

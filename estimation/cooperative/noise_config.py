@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mobisense.core.config import NonNegativeFloat, PositiveFloat, StrictModel
-from mobisense.estimation.kalman import transpose
+from ...core.config import NonNegativeFloat, PositiveFloat, StrictModel
+from ..kalman import transpose
 
 __all__ = ["CooperativeNoise", "NoiseConfig"]
 

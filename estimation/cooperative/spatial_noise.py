@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mobisense.core.config import PositiveFloat, StrictModel
-from mobisense.core.registry import Registry
+from ...core.config import PositiveFloat, StrictModel
+from ...core.registry import Registry
 
 __all__ = [
     "Kernel",

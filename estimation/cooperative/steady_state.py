@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from mobisense.estimation.cooperative.information_model import cross_formation, taylor_matrices
-from mobisense.estimation.cooperative.noise_config import CooperativeNoise
+from .information_model import cross_formation, taylor_matrices
+from .noise_config import CooperativeNoise
 
 __all__ = [
     "SteadyState",

@@ -1,6 +1,6 @@
 """Distributed constrained cooperative Kalman filter: sensor meshes, the finite-volume PDE constraint, the filter."""
 
-from mobisense.core.lazy import lazy_exports
+from ...core.lazy import lazy_exports
 
 __getattr__, __dir__, __all__ = lazy_exports(
     __name__,

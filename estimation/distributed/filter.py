@@ -50,11 +50,11 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from mobisense.core.config import NonNegativeFloat, PositiveFloat, StrictModel
-from mobisense.estimation.cooperative.information_model import transition_matrix, vec_to_hessian
-from mobisense.estimation.distributed.fvm import far_points, laplacian_stencil, pde_constraint, project
-from mobisense.estimation.distributed.mesh import CellEdge, SensorMesh
-from mobisense.estimation.kalman import predict, update
+from ...core.config import NonNegativeFloat, PositiveFloat, StrictModel
+from ..cooperative.information_model import transition_matrix, vec_to_hessian
+from ..kalman import predict, update
+from .fvm import far_points, laplacian_stencil, pde_constraint, project
+from .mesh import CellEdge, SensorMesh
 
 __all__ = [
     "ValueGradientStd",

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mobisense.estimation.distributed.mesh import MeshError, SensorMesh, following, polygon_area
+from .mesh import MeshError, SensorMesh, following, polygon_area
 
 __all__ = [
     "LaplacianStencil",

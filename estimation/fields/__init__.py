@@ -1,6 +1,6 @@
 """Scalar fields z(r, t) with exact derivatives: analytic library, advection–diffusion, gridded data."""
 
-from mobisense.core.lazy import lazy_exports
+from ...core.lazy import lazy_exports
 
 __getattr__, __dir__, __all__ = lazy_exports(
     __name__,

@@ -28,7 +28,7 @@ from typing import Literal
 
 import numpy as np
 
-from mobisense.estimation.fields.base import Field, register_field
+from .base import Field, register_field
 
 __all__ = ["AdvectionDiffusionField"]
 

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from mobisense.core.registry import Registry
+from ...core.registry import Registry
 
 __all__ = ["Field", "FIELDS", "register_field", "make_field", "level_curve_frame"]
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mobisense.estimation.fields.base import Field, register_field
+from .base import Field, register_field
 
 __all__ = ["GriddedField"]
 

@@ -26,8 +26,8 @@ from typing import Any
 import numpy as np
 from pydantic import ConfigDict, PrivateAttr, model_validator
 
-from mobisense.core.config import InvalidValue, StrictModel
-from mobisense.estimation.fields.base import FIELDS, Field, make_field, register_field
+from ...core.config import InvalidValue, StrictModel
+from .base import FIELDS, Field, make_field, register_field
 
 __all__ = ["QuadraticField", "TwoChargesField", "OceanTemperatureField", "FieldSpec", "grid_dataset", "load_fields"]
 

@@ -1,6 +1,6 @@
 """Target tracking with directional range sensors: the sensor ring and the switching Kalman filter."""
 
-from mobisense.core.lazy import lazy_exports
+from ...core.lazy import lazy_exports
 
 __getattr__, __dir__, __all__ = lazy_exports(
     __name__,

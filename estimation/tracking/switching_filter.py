@@ -29,8 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mobisense.core.registry import Registry
-from mobisense.estimation.kalman import predict, symmetrize, update
+from ...core.registry import Registry
+from ..kalman import predict, symmetrize, update
 
 __all__ = [
     "C_POSITION",

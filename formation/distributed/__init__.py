@@ -1,6 +1,6 @@
 """Sensor meshes in an advection–diffusion field: gradient-based formations and the distributed-filter simulation."""
 
-from mobisense.core.lazy import lazy_exports
+from ...core.lazy import lazy_exports
 
 __getattr__, __dir__, __all__ = lazy_exports(
     __name__,

@@ -37,8 +37,8 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from mobisense.core.config import FiniteFloat, InvalidValue, NonNegativeFloat, PositiveFloat, StrictModel
-from mobisense.estimation.distributed.mesh import SensorMesh
+from ...core.config import FiniteFloat, InvalidValue, NonNegativeFloat, PositiveFloat, StrictModel
+from ...estimation.distributed.mesh import SensorMesh
 
 __all__ = [
     "FormationOptions",

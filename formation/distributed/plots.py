@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from mobisense.estimation.fields.base import Field
+from ...estimation.fields.base import Field
 
 __all__ = ["plot_paths", "plot_estimates"]
 

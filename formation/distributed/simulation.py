@@ -19,12 +19,12 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from mobisense.core.config import InvalidValue, NonNegativeFloat, PositiveFloat, StrictModel, Vector2
-from mobisense.estimation.distributed.filter import DistributedFilter, FilterOptions, PdeModel
-from mobisense.estimation.distributed.mesh import MeshError, SensorMesh
-from mobisense.estimation.fields.advection_diffusion import AdvectionDiffusionField
-from mobisense.formation.distributed.gradient_formation import FormationOptions, GradientFormation
-from mobisense.formation.simulation_result import SimulationResult
+from ...core.config import InvalidValue, NonNegativeFloat, PositiveFloat, StrictModel, Vector2
+from ...estimation.distributed.filter import DistributedFilter, FilterOptions, PdeModel
+from ...estimation.distributed.mesh import MeshError, SensorMesh
+from ...estimation.fields.advection_diffusion import AdvectionDiffusionField
+from ..simulation_result import SimulationResult
+from .gradient_formation import FormationOptions, GradientFormation
 
 __all__ = [
     "TimeGrid",
@@ -394,8 +394,8 @@ class DistributedResult(SimulationResult):
 
     def plot(self, folder: str | Path) -> list[Path]:
         """``paths.png`` (cell-centre paths over level curves) and ``estimates.png`` (estimates vs truth)."""
-        from mobisense.core.files import write_figure
-        from mobisense.formation.distributed.plots import plot_estimates, plot_paths
+        from ...core.files import write_figure
+        from .plots import plot_estimates, plot_paths
 
         folder = Path(folder)
         field = self.scenario.field.build()

@@ -1,6 +1,6 @@
 """Leader–follower unicycle formations: controls, references, paths, sensing and the closed-loop simulation."""
 
-from mobisense.core.lazy import lazy_exports
+from ...core.lazy import lazy_exports
 
 __getattr__, __dir__, __all__ = lazy_exports(
     __name__,

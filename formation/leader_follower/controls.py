@@ -25,7 +25,7 @@ import warnings
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
-from mobisense.core.registry import Registry
+from ...core.registry import Registry
 
 __all__ = [
     "RelativeMeasurement",

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mobisense.core.files import write_figure
+from ...core.files import write_figure
 
 __all__ = [
     "plot_paths",

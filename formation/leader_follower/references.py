@@ -18,10 +18,10 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
-from mobisense.core.registry import Registry
-from mobisense.formation.leader_follower.controls import FormationReference
-from mobisense.formation.leader_follower.paths import chord_window
-from mobisense.formation.leader_follower.unicycle import wrap_angle
+from ...core.registry import Registry
+from .controls import FormationReference
+from .paths import chord_window
+from .unicycle import wrap_angle
 
 __all__ = [
     "ReferenceSchedule",

@@ -17,15 +17,16 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from mobisense.estimation.tracking.range_ring import RangeSensorRing
-from mobisense.formation.leader_follower.controls import WARN_COS, make_control, warn_near_singular
-from mobisense.formation.leader_follower.references import (
+from ...estimation.tracking.range_ring import RangeSensorRing
+from ..simulation_result import SimulationResult
+from .controls import WARN_COS, make_control, warn_near_singular
+from .references import (
     BearingRampReference,
     ConstantReference,
     PathReference,
     ReferenceSchedule,
 )
-from mobisense.formation.leader_follower.scenario import (
+from .scenario import (
     ConstantReferenceConfig,
     LeaderFollowerScenario,
     RampReferenceConfig,
@@ -33,14 +34,13 @@ from mobisense.formation.leader_follower.scenario import (
     RingSensingConfig,
     SensingConfig,
 )
-from mobisense.formation.leader_follower.sensing import RingSpec
-from mobisense.formation.leader_follower.simulation import (
+from .sensing import RingSpec
+from .simulation import (
     IntegrationSettings,
     LeaderFollowerProblem,
     LeaderMotion,
     simulate,
 )
-from mobisense.formation.simulation_result import SimulationResult
 
 __all__ = [
     "build_reference",
@@ -214,7 +214,7 @@ class LeaderFollowerResult(SimulationResult):
 
     def plot(self, folder: str | Path) -> list[Path]:
         """``paths.png``, ``formation_errors.png``, ``reference_point_errors.png``, ``deviation.png`` (+ more)."""
-        from mobisense.formation.leader_follower.plots import save_figures
+        from .plots import save_figures
 
         return save_figures(self.dataset, Path(folder))
 

@@ -27,10 +27,10 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import AfterValidator, Field, field_validator, model_validator
 
-from mobisense.core.config import FiniteFloat, InvalidValue, NonNegativeFloat, PositiveFloat, StrictModel
-from mobisense.estimation.tracking.range_ring import KHEPERA_MOUNT_ANGLES_DEG, KHEPERA_PAIRS
-from mobisense.estimation.tracking.switching_filter import MergeName
-from mobisense.formation.leader_follower.controls import CONTROLS
+from ...core.config import FiniteFloat, InvalidValue, NonNegativeFloat, PositiveFloat, StrictModel
+from ...estimation.tracking.range_ring import KHEPERA_MOUNT_ANGLES_DEG, KHEPERA_PAIRS
+from ...estimation.tracking.switching_filter import MergeName
+from .controls import CONTROLS
 
 __all__ = [
     "LeaderConfig",
@@ -254,7 +254,7 @@ class LeaderFollowerScenario(StrictModel):
 
 def _check_ramp(reference: RampReferenceConfig, duration: float, where: str) -> None:
     """Reject a ramp whose ``β0(t)`` leaves (−π/2, π/2) or whose ``d0(t)`` reaches 0 within the run."""
-    from mobisense.formation.leader_follower.references import BearingRampReference
+    from .references import BearingRampReference
 
     schedule = BearingRampReference(
         reference.distance,

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mobisense.estimation.tracking.range_ring import RangeSensorRing
-from mobisense.estimation.tracking.switching_filter import SwitchingKalmanFilter
-from mobisense.formation.leader_follower.controls import RelativeMeasurement
+from ...estimation.tracking.range_ring import RangeSensorRing
+from ...estimation.tracking.switching_filter import SwitchingKalmanFilter
+from .controls import RelativeMeasurement
 
 __all__ = ["Sensed", "ExactSensing", "RingSensing", "RingSpec", "exact_measurement", "relative_from_estimate"]
 

@@ -25,11 +25,11 @@ import numpy as np
 import xarray as xr
 from scipy.integrate import solve_ivp
 
-from mobisense.formation.leader_follower.controls import FormationControl, FormationReference
-from mobisense.formation.leader_follower.paths import path_deviation
-from mobisense.formation.leader_follower.references import ReferenceSchedule
-from mobisense.formation.leader_follower.sensing import ExactSensing, RingSpec, exact_measurement
-from mobisense.formation.leader_follower.unicycle import reference_point_error, relative_state, unicycle_rates
+from .controls import FormationControl, FormationReference
+from .paths import path_deviation
+from .references import ReferenceSchedule
+from .sensing import ExactSensing, RingSpec, exact_measurement
+from .unicycle import reference_point_error, relative_state, unicycle_rates
 
 __all__ = ["LeaderMotion", "IntegrationSettings", "LeaderFollowerProblem", "simulate"]
 

@@ -1,6 +1,6 @@
 """Closed-loop replays: formations on a field, and optimised plans flown by platforms with Monte Carlo validation."""
 
-from mobisense.core.lazy import lazy_exports
+from ...core.lazy import lazy_exports
 
 __getattr__, __dir__, __all__ = lazy_exports(
     __name__,

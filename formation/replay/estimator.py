@@ -31,12 +31,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mobisense.estimation.cooperative.filter import CooperativeKalmanFilter
-from mobisense.estimation.cooperative.hessian import CurvatureHessian, LeastSquaresHessian, least_squares_hessian
-from mobisense.estimation.cooperative.information_model import formation_center, hessian_drift, transition_matrix
-from mobisense.estimation.cooperative.noise_config import CooperativeNoise
-from mobisense.estimation.cooperative.spatial_noise import SpatialNoise
-from mobisense.estimation.fields.base import Field
+from ...estimation.cooperative.filter import CooperativeKalmanFilter
+from ...estimation.cooperative.hessian import CurvatureHessian, LeastSquaresHessian, least_squares_hessian
+from ...estimation.cooperative.information_model import formation_center, hessian_drift, transition_matrix
+from ...estimation.cooperative.noise_config import CooperativeNoise
+from ...estimation.cooperative.spatial_noise import SpatialNoise
+from ...estimation.fields.base import Field
 
 __all__ = ["TrueField", "WindowHessian", "ClosedLoopEstimator"]
 

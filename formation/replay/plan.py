@@ -28,14 +28,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from pydantic import Field
 
-from mobisense.core.config import PositiveFloat, StrictModel, Vector2
-from mobisense.estimation import kalman
-from mobisense.formation.platforms import PlatformLimits, PlatformLimitsConfig, newton_rates
-from mobisense.formation.replay.reference import ReferenceTrajectory, TrackingController
+from ...core.config import PositiveFloat, StrictModel, Vector2
+from ...estimation import kalman
+from ..platforms import PlatformLimits, PlatformLimitsConfig, newton_rates
+from .reference import ReferenceTrajectory, TrackingController
 
 if TYPE_CHECKING:
-    from mobisense.ocp.problem import Problem
-    from mobisense.ocp.solution import Solution
+    from ...ocp.problem import Problem
+    from ...ocp.solution import Solution
 
 __all__ = [
     "TrackingGains",

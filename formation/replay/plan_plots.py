@@ -66,7 +66,7 @@ def _nees(ds: Any) -> Any:
 
 def save_ocp_figures(ds: Any, locations: np.ndarray, out: Path) -> list[Path]:
     """Write ``paths.png``, ``covariance.png`` and ``nees.png`` into ``out``; return their paths."""
-    from mobisense.core.files import write_figure
+    from ...core.files import write_figure
 
     n = len(ds["row"])
     ds = ds.assign(nees_predicted=ds["nees_predicted"] / n, nees_filter=ds["nees_filter"] / n)

@@ -146,7 +146,7 @@ def _tracking(ds: Any, units: Any) -> Any:
 
 def save_figures(ds: Any, field: Any, scenario: Any, out: Path) -> list[Path]:
     """Write the figures into ``out``; return their paths."""
-    from mobisense.core.files import write_figure
+    from ...core.files import write_figure
 
     u = scenario.units
     figures = {

@@ -19,10 +19,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from mobisense.formation.shape_control import FixedShapeController
+from ..shape_control import FixedShapeController
 
 if TYPE_CHECKING:
-    from mobisense.ocp.solution import Solution
+    from ...ocp.solution import Solution
 
 __all__ = ["load_or_solve", "ReferenceTrajectory", "TrackingController"]
 
@@ -43,15 +43,15 @@ def load_or_solve(solution_path: Path, problem_path: Path | None) -> tuple[Solut
     RuntimeError
         The solver did not reach ε = 1.
     """
-    from mobisense.core.config import ConfigError
-    from mobisense.ocp.solution import Solution
+    from ...core.config import ConfigError
+    from ...ocp.solution import Solution
 
     if solution_path.is_file():
         return Solution.load(solution_path), f"loaded {solution_path}"
     if problem_path is None:
         raise ConfigError(f"{solution_path}: file not found (give 'problem:' to solve it first)")
-    from mobisense.ocp.direct.solver import solve_direct
-    from mobisense.ocp.problem import load_problem
+    from ...ocp.direct.solver import solve_direct
+    from ...ocp.problem import load_problem
 
     problem = load_problem(problem_path)  # ConfigError (one line) if invalid
     solution = solve_direct(problem)

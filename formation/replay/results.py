@@ -19,9 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from mobisense.formation.level_curve import heading_error
-from mobisense.formation.replay.simulation import CenterLevelCurve, ReplayRecord, ReplaySystem
-from mobisense.formation.shape_control import shape_error
+from ..level_curve import heading_error
+from ..shape_control import shape_error
+from .simulation import CenterLevelCurve, ReplayRecord, ReplaySystem
 
 __all__ = ["replay_dataset", "replay_summary"]
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from mobisense.formation.simulation_result import SimulationResult
+from ..simulation_result import SimulationResult
 
 __all__ = ["FieldReplayResult", "PlanReplayResult", "run_field_replay", "run_plan_replay"]
 
@@ -28,7 +28,7 @@ class FieldReplayResult(SimulationResult):
 
     def plot(self, folder: str | Path) -> list[Path]:
         """``paths.png``, ``z_estimate.png``, ``shape.png``, ``heading.png`` (+ ``replay.mp4/gif`` if animated)."""
-        from mobisense.formation.replay.plots import save_animation, save_figures
+        from .plots import save_animation, save_figures
 
         folder = Path(folder)
         files = save_figures(self.dataset, self.system.field, self.scenario, folder)
@@ -78,7 +78,7 @@ class PlanReplayResult(SimulationResult):
 
     def plot(self, folder: str | Path) -> list[Path]:
         """``paths.png`` (flown vs planned), ``covariance.png`` and ``nees.png``."""
-        from mobisense.formation.replay.plan_plots import save_ocp_figures
+        from .plan_plots import save_ocp_figures
 
         return save_ocp_figures(self.dataset, self.solution.problem.matrices()["locations"], Path(folder))
 
@@ -86,7 +86,7 @@ class PlanReplayResult(SimulationResult):
         """``solution.nc`` when the plan was solved for this replay (no solution file existed)."""
         if not self.solved_here:
             return []
-        from mobisense.core.files import write_netcdf
+        from ...core.files import write_netcdf
 
         write_netcdf(folder / "solution.nc", self.solution.to_dataset())
         return [folder / "solution.nc"]
@@ -135,8 +135,8 @@ def run_field_replay(
     ReplayError
         The closed loop became singular.
     """
-    from mobisense.formation.replay.results import replay_dataset, replay_summary
-    from mobisense.formation.replay.simulation import build_system, simulate
+    from .results import replay_dataset, replay_summary
+    from .simulation import build_system, simulate
 
     system = build_system(scenario, source)
     seed = scenario.seed if seed is None else seed
@@ -164,9 +164,9 @@ def run_plan_replay(scenario: Any, source: Path, seed: int | None = None) -> Pla
     RuntimeError
         The plan had to be solved and the solver did not reach ε = 1.
     """
-    from mobisense.core.config import ConfigError
-    from mobisense.formation.replay.plan import replay_solution, resolve
-    from mobisense.formation.replay.reference import load_or_solve
+    from ...core.config import ConfigError
+    from .plan import replay_solution, resolve
+    from .reference import load_or_solve
 
     solution_path = resolve(source, scenario.solution)
     solution, note = load_or_solve(solution_path, resolve(source, scenario.problem))

@@ -28,7 +28,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BeforeValidator, Field, SerializeAsAny, model_validator
 
-from mobisense.core.config import (
+from ...core.config import (
     ConfigError,
     FiniteFloat,
     InvalidValue,
@@ -38,12 +38,12 @@ from mobisense.core.config import (
     Vector2,
     parse_config,
 )
-from mobisense.estimation.cooperative.information_model import cross_formation
-from mobisense.estimation.cooperative.noise_config import NoiseConfig
-from mobisense.estimation.cooperative.spatial_noise import SpatialNoiseConfig
-from mobisense.estimation.fields.library import FieldSpec
-from mobisense.formation.level_curve import LEVEL_FUNCTIONS, LevelFunctionName
-from mobisense.formation.replay.plan import TrackingGains
+from ...estimation.cooperative.information_model import cross_formation
+from ...estimation.cooperative.noise_config import NoiseConfig
+from ...estimation.cooperative.spatial_noise import SpatialNoiseConfig
+from ...estimation.fields.library import FieldSpec
+from ..level_curve import LEVEL_FUNCTIONS, LevelFunctionName
+from .plan import TrackingGains
 
 __all__ = [
     "InitialState",

@@ -23,12 +23,12 @@ from typing import Any
 
 import numpy as np
 
-from mobisense.core.config import ConfigError
-from mobisense.estimation.cooperative.information_model import cross_formation, rotation
-from mobisense.estimation.cooperative.noise_config import NoiseConfig
-from mobisense.formation.jacobi import JacobiTransform
-from mobisense.formation.replay.scenario import CrossFormation, RigidFormation, RotatingFormation, ShapeConfig
-from mobisense.formation.shape_control import FixedShapeController, RotatingShapeController, perp
+from ...core.config import ConfigError
+from ...estimation.cooperative.information_model import cross_formation, rotation
+from ...estimation.cooperative.noise_config import NoiseConfig
+from ..jacobi import JacobiTransform
+from ..shape_control import FixedShapeController, RotatingShapeController, perp
+from .scenario import CrossFormation, RigidFormation, RotatingFormation, ShapeConfig
 
 __all__ = ["OrientedShape", "RotatingShape", "cross_shape", "build_shape_task"]
 
@@ -188,7 +188,7 @@ def cross_shape(
     For ``adaptive`` the start is the steady-state design within the same bounds (then step 3A takes
     over at the first sample).
     """
-    from mobisense.estimation.cooperative.formation_design import design_cross_formation
+    from ...estimation.cooperative.formation_design import design_cross_formation
 
     if shape.a is not None and shape.b is not None:
         return shape.a, shape.b, {"source": "given"}

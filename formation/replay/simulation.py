@@ -26,16 +26,16 @@ from typing import Any
 
 import numpy as np
 
-from mobisense.core.config import ConfigError
-from mobisense.estimation.cooperative.information_model import formation_center, rotation
-from mobisense.formation.jacobi import JacobiTransform
-from mobisense.formation.level_curve import LEVEL_FUNCTIONS, LevelCurveController
-from mobisense.formation.platforms import PlatformLimits, newton_rates
-from mobisense.formation.replay.estimator import ClosedLoopEstimator, TrueField
-from mobisense.formation.replay.plan import resolve
-from mobisense.formation.replay.reference import ReferenceTrajectory, TrackingController, load_or_solve
-from mobisense.formation.replay.scenario import FieldReplayScenario, LevelCurveMotion, ReferenceMotion
-from mobisense.formation.replay.shape_tasks import build_shape_task
+from ...core.config import ConfigError
+from ...estimation.cooperative.information_model import formation_center, rotation
+from ..jacobi import JacobiTransform
+from ..level_curve import LEVEL_FUNCTIONS, LevelCurveController
+from ..platforms import PlatformLimits, newton_rates
+from .estimator import ClosedLoopEstimator, TrueField
+from .plan import resolve
+from .reference import ReferenceTrajectory, TrackingController, load_or_solve
+from .scenario import FieldReplayScenario, LevelCurveMotion, ReferenceMotion
+from .shape_tasks import build_shape_task
 
 __all__ = ["ReplayError", "ReplaySystem", "ReplayRecord", "build_system", "simulate"]
 
@@ -251,8 +251,8 @@ def _adapt_shape(system: ReplaySystem, y: np.ndarray, k: int) -> None:
     The formation cannot jump, so the shape chosen now serves the next measurement, whose prior is
     predicted as ``P_k(+) + M`` (``A ≈ I`` over one step along a level curve, SPEC §2.4).
     """
-    from mobisense.estimation.cooperative.formation_design import adaptive_shape_step
-    from mobisense.estimation.cooperative.information_model import cross_formation
+    from ...estimation.cooperative.formation_design import adaptive_shape_step
+    from ...estimation.cooperative.information_model import cross_formation
 
     shape_cfg = getattr(system.scenario.formation, "shape", None)
     adaptive = None if shape_cfg is None else shape_cfg.adaptive

@@ -1,6 +1,6 @@
 """Many solves at once on dask: parameter sweeps and multi-start (extra ``mobisense[sweep]``)."""
 
-from mobisense.core.lazy import lazy_exports
+from ...core.lazy import lazy_exports
 
 __getattr__, __dir__, __all__ = lazy_exports(
     __name__,

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from mobisense.ocp.batch.worker import solve_task
+from .worker import solve_task
 
 __all__ = ["open_client", "run_tasks", "nearest_seed"]
 

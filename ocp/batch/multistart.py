@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from mobisense.ocp.problem import Problem
-from mobisense.ocp.solution import Solution
+from ..problem import Problem
+from ..solution import Solution
 
 __all__ = ["distinct_optima", "solve_multistart"]
 
@@ -37,7 +37,7 @@ def solve_multistart(
     The returned solution's ``stats["multistart"]`` holds ``starts``, ``converged`` and ``optima``
     (one entry per distinct local optimum: cost, which starts reached it, final sensor positions).
     """
-    from mobisense.ocp.batch.engine import open_client, run_tasks
+    from .engine import open_client, run_tasks
 
     payloads = [{"problem": problem.normalised(), "guess_seed": None if k == 0 else k} for k in range(starts)]
     solutions: list[Solution | None] = [None] * starts

@@ -22,10 +22,10 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field, field_validator
 
-from mobisense.core.config import ConfigError, StrictModel, load_config
-from mobisense.core.keypath import get_path, parse_key_path, set_path
-from mobisense.ocp.model import Structure
-from mobisense.ocp.problem import Problem, load_problem
+from ...core.config import ConfigError, StrictModel, load_config
+from ...core.keypath import get_path, parse_key_path, set_path
+from ..model import Structure
+from ..problem import Problem, load_problem
 
 __all__ = ["SweepSpec", "SweepTask", "load_sweep", "expand_sweep"]
 

@@ -10,8 +10,8 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
-from mobisense.ocp.batch.sweep import SweepSpec, SweepTask
-from mobisense.ocp.solution import StartKind
+from ..solution import StartKind
+from .sweep import SweepSpec, SweepTask
 
 __all__ = ["SweepProgress", "sweep_summary"]
 

@@ -6,8 +6,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mobisense.ocp.batch.sweep import expand_sweep, load_sweep
-from mobisense.ocp.batch.sweep_report import SweepProgress, sweep_summary
+from .sweep import expand_sweep, load_sweep
+from .sweep_report import SweepProgress, sweep_summary
 
 __all__ = ["SweepResult", "run_sweep", "RESULT_COLUMNS"]
 
@@ -84,8 +84,8 @@ def run_sweep(
     """
     import pandas as pd
 
-    from mobisense.core.files import write_json, write_netcdf
-    from mobisense.ocp.batch.engine import open_client, run_tasks
+    from ...core.files import write_json, write_netcdf
+    from .engine import open_client, run_tasks
 
     path, out = Path(path), Path(out)
     spec, base = load_sweep(path)
@@ -136,7 +136,7 @@ def _read_existing(path: Path) -> list[dict[str, Any]]:
 def _write_rows(path: Path, rows: list[dict[str, Any]]) -> None:
     import pandas as pd
 
-    from mobisense.core.files import atomic_path
+    from ...core.files import atomic_path
 
     frame = pd.DataFrame(sorted(rows, key=lambda r: r["index"]))
     with atomic_path(path) as tmp:

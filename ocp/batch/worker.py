@@ -15,17 +15,17 @@ __all__ = ["solve_task", "worker_name"]
 
 def solve_task(payload: dict[str, Any]) -> dict[str, Any]:
     """Worker side: solve one task. ``payload`` = {problem, seed (NLP point or None), guess_seed (int|None)}."""
-    from mobisense.ocp.direct.solver import solve_direct
-    from mobisense.ocp.direct.transcription import transcription_cache_hits
-    from mobisense.ocp.problem import Problem
-    from mobisense.ocp.solution import StartKind
+    from ..direct.solver import solve_direct
+    from ..direct.transcription import transcription_cache_hits
+    from ..problem import Problem
+    from ..solution import StartKind
 
     t0 = time.perf_counter()
     hits = transcription_cache_hits()
     problem = Problem.from_dict(payload["problem"], source="task")
     guess = None
     if payload.get("guess_seed") is not None:
-        from mobisense.ocp.direct.guesses import random_guess
+        from ..direct.guesses import random_guess
 
         guess = random_guess(problem, payload["guess_seed"])
     solution = solve_direct(problem, init=payload.get("seed"), guess=guess)

@@ -1,6 +1,6 @@
 """Direct collocation of the mobile-sensor problem: the NLP transcription and the ε-continuation driver."""
 
-from mobisense.core.lazy import lazy_exports
+from ...core.lazy import lazy_exports
 
 __getattr__, __dir__, __all__ = lazy_exports(
     __name__,

@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from mobisense.ocp.direct.transcription import DirectCollocation, transcription_for
-from mobisense.ocp.problem import Problem
-from mobisense.ocp.simulate import Trajectory, coast, integrate
+from ..problem import Problem
+from ..simulate import Trajectory, coast, integrate
+from .transcription import DirectCollocation, transcription_for
 
 __all__ = ["state_grid", "initial_guess", "coasting_baseline", "random_guess"]
 

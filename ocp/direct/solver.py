@@ -15,12 +15,12 @@ from typing import Any
 
 import numpy as np
 
-from mobisense.ocp.direct.guesses import initial_guess, state_grid
-from mobisense.ocp.direct.transcription import DirectCollocation, NLPResult, transcription_for
-from mobisense.ocp.homotopy import run_continuation
-from mobisense.ocp.problem import Problem
-from mobisense.ocp.simulate import Trajectory, coast
-from mobisense.ocp.solution import HomotopyStep, Solution, SolveStatus, StartKind
+from ..homotopy import run_continuation
+from ..problem import Problem
+from ..simulate import Trajectory, coast
+from ..solution import HomotopyStep, Solution, SolveStatus, StartKind
+from .guesses import initial_guess, state_grid
+from .transcription import DirectCollocation, NLPResult, transcription_for
 
 __all__ = ["solve_direct"]
 

@@ -20,10 +20,10 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from mobisense.ocp.collocation import CollocationScheme
-from mobisense.ocp.model import SensorKalmanModel, Structure
-from mobisense.ocp.problem import Problem
-from mobisense.ocp.state_layout import diagonal_indices
+from ..collocation import CollocationScheme
+from ..model import SensorKalmanModel, Structure
+from ..problem import Problem
+from ..state_layout import diagonal_indices
 
 __all__ = [
     "DirectCollocation",

@@ -1,6 +1,6 @@
 """Indirect method: the Pontryagin boundary-value problem, its solvers and the ε-continuation through folds."""
 
-from mobisense.core.lazy import lazy_exports
+from ...core.lazy import lazy_exports
 
 __getattr__, __dir__, __all__ = lazy_exports(
     __name__,

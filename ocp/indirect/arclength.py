@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from mobisense.ocp.indirect.collocation_newton import NewtonResult, factorise, newton
+from .collocation_newton import NewtonResult, factorise, newton
 
 __all__ = ["ArclengthTracker", "TrackerReport"]
 

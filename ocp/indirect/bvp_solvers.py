@@ -31,12 +31,12 @@ from typing import Any
 
 import numpy as np
 
-from mobisense.ocp.indirect.arclength import ArclengthTracker
-from mobisense.ocp.indirect.collocation_newton import collocation_mesh, newton
-from mobisense.ocp.indirect.hamiltonian import HamiltonianSystem, hamiltonian_system
-from mobisense.ocp.model import Structure
-from mobisense.ocp.problem import Problem
-from mobisense.ocp.registries import BVP_SOLVERS
+from ..model import Structure
+from ..problem import Problem
+from ..registries import BVP_SOLVERS
+from .arclength import ArclengthTracker
+from .collocation_newton import collocation_mesh, newton
+from .hamiltonian import HamiltonianSystem, hamiltonian_system
 
 __all__ = ["BVPSolution", "BVPSolver", "register_bvp_solver", "CollocationBVP", "ScipyBVP"]
 

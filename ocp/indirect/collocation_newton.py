@@ -28,9 +28,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from mobisense.ocp.collocation import CollocationScheme
-from mobisense.ocp.indirect.hamiltonian import HamiltonianSystem, hamiltonian_system
-from mobisense.ocp.model import Structure
+from ..collocation import CollocationScheme
+from ..model import Structure
+from .hamiltonian import HamiltonianSystem, hamiltonian_system
 
 __all__ = ["CollocationMesh", "NewtonResult", "newton", "factorise", "collocation_mesh"]
 

@@ -48,9 +48,9 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from mobisense.core.config import ConfigError
-from mobisense.ocp.model import SensorKalmanModel, Structure
-from mobisense.ocp.state_layout import diagonal_indices
+from ...core.config import ConfigError
+from ..model import SensorKalmanModel, Structure
+from ..state_layout import diagonal_indices
 
 __all__ = ["HamiltonianSystem", "hamiltonian_system"]
 

@@ -20,9 +20,9 @@ from typing import Any
 
 import numpy as np
 
-from mobisense.ocp.indirect.hamiltonian import hamiltonian_system
-from mobisense.ocp.model import Structure
-from mobisense.ocp.solution import Solution
+from ..model import Structure
+from ..solution import Solution
+from .hamiltonian import hamiltonian_system
 
 __all__ = ["optimality_residuals", "common_times"]
 

@@ -18,15 +18,15 @@ import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.interpolate import CubicSpline
 
-from mobisense.ocp.homotopy import run_continuation
-from mobisense.ocp.indirect.bvp_solvers import BVPSolution, BVPSolver, Guess
-from mobisense.ocp.indirect.hamiltonian import HamiltonianSystem, hamiltonian_system
-from mobisense.ocp.indirect.residuals import optimality_residuals
-from mobisense.ocp.model import Structure
-from mobisense.ocp.problem import Problem
-from mobisense.ocp.registries import BVP_SOLVERS
-from mobisense.ocp.simulate import Trajectory, integrate
-from mobisense.ocp.solution import HomotopyStep, Solution, SolveStatus
+from ..homotopy import run_continuation
+from ..model import Structure
+from ..problem import Problem
+from ..registries import BVP_SOLVERS
+from ..simulate import Trajectory, integrate
+from ..solution import HomotopyStep, Solution, SolveStatus
+from .bvp_solvers import BVPSolution, BVPSolver, Guess
+from .hamiltonian import HamiltonianSystem, hamiltonian_system
+from .residuals import optimality_residuals
 
 __all__ = [
     "solve_indirect",
