@@ -196,7 +196,8 @@ class CooperativeKalmanFilter:
     def predict(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Move the estimate to the centre of ``positions`` ``(..., N, 2)`` (SPEC §2.2, eqs. 13-14).
 
-        Uses the current Hessian estimate for ``h_{k−1} = [0; Ĥ_{k−1} Δr]``. Returns the prior state
+        Uses the current Hessian estimate for ``h_{k−1} = [½ Δr' Ĥ_{k−1} Δr; Ĥ_{k−1} Δr]`` (eq. cooperative.5:
+        the paper's first-order ``[0; Ĥ Δr]`` plus the second-order value term). Returns the prior state
         ``(..., 3)`` and covariance ``(..., 3, 3)``.
         """
         positions = np.asarray(positions, dtype=float)

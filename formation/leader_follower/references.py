@@ -116,7 +116,8 @@ class BearingRampReference(ReferenceSchedule):
         β0(t) = β0(0) + c t
         d0(t) = d0(0) + a/(f c) [sin(f β0(t)) − sin(f β0(0))]
 
-    which stays in [0.5, 0.556] over the seed's 10 s window (a bump, consistent with its Fig. 19).
+    which over the seed's 10 s window rises from 0.5 to ≈ 0.556 at t ≈ 5 s and falls back, dipping slightly
+    below its start to 0.4994 at t = 10 s (a bump, consistent with its Fig. 19).
     """
 
     kind = "ramp"

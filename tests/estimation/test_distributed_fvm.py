@@ -138,7 +138,7 @@ def test_exact_for_linear_fields_on_any_cell() -> None:
 
 
 def test_converges_on_smoothly_distorted_cells() -> None:
-    """Irregular quadrilaterals (a smooth warp of a grid): the error of interior cells falls as h²."""
+    """Irregular quadrilaterals (a smooth warp of a grid): the error of interior cells falls at about h²."""
 
     def warp(p: np.ndarray) -> np.ndarray:
         x, y = p[:, 0], p[:, 1]
