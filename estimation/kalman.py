@@ -69,7 +69,7 @@ def symmetrize(P: Any) -> Any:
 
 
 def predict(x: Any, P: Any, F: Any, Q: Any, u: Any = 0.0) -> tuple[Any, Any]:
-    """Time update ``x⁻ = F x + u``, ``P⁻ = F P F' + Q`` (SPEC §2.2, eqs. 13-14).
+    """Time update ``x⁻ = F x + u``, ``P⁻ = F P F' + Q`` (docs/theory/cooperative.md, eq. cooperative.6).
 
     Parameters
     ----------
@@ -82,18 +82,18 @@ def predict(x: Any, P: Any, F: Any, Q: Any, u: Any = 0.0) -> tuple[Any, Any]:
     u : array, shape (..., n, 1), optional
         Known input (the Hessian drift ``h``).
     """
-    x_prior = F @ x + u  # SPEC §2.2, eq. 13
-    P_prior = F @ P @ transpose(F) + Q  # SPEC §2.2, eq. 14
+    x_prior = F @ x + u  # docs/theory/cooperative.md, eq. cooperative.6
+    P_prior = F @ P @ transpose(F) + Q  # docs/theory/cooperative.md, eq. cooperative.6
     return x_prior, P_prior
 
 
 def innovation(x: Any, P: Any, y: Any, H: Any, R: Any) -> tuple[Any, Any]:
-    """Innovation ``ν = y − H x`` and its covariance ``S = H P H' + R`` (SPEC §2.2, eqs. 15-16)."""
+    """Innovation ``ν = y − H x`` and its covariance ``S = H P H' + R`` (docs/theory/cooperative.md §2.2)."""
     return y - H @ x, H @ P @ transpose(H) + R
 
 
 def update(x: Any, P: Any, y: Any, H: Any, R: Any) -> tuple[Any, Any, Any, Any]:
-    """Measurement update with the Joseph form (SPEC §2.2, eqs. 15-17).
+    """Measurement update with the Joseph form (docs/theory/cooperative.md, eqs. cooperative.7–8).
 
     Parameters
     ----------
@@ -120,15 +120,16 @@ def update(x: Any, P: Any, y: Any, H: Any, R: Any) -> tuple[Any, Any, Any, Any]:
     gain and equals eq. 17's information form for the optimal one.
     """
     nu, S = innovation(x, P, y, H, R)
-    K = transpose(solve(S, H @ P))  # K = P H' S⁻¹ (S and P symmetric), SPEC §2.2, eq. 15
-    x_post = x + K @ nu  # SPEC §2.2, eq. 16
+    K = transpose(solve(S, H @ P))  # K = P H' S⁻¹ (S and P symmetric), docs/theory/cooperative.md, eq. cooperative.7
+    x_post = x + K @ nu  # docs/theory/cooperative.md, eq. cooperative.7
     I_KH = identity(P.shape[-1], P) - K @ H
-    P_post = I_KH @ P @ transpose(I_KH) + K @ R @ transpose(K)  # SPEC §2.2, eq. 17 (Joseph form)
+    # docs/theory/cooperative.md, eq. cooperative.8 (Joseph form)
+    P_post = I_KH @ P @ transpose(I_KH) + K @ R @ transpose(K)
     return x_post, P_post, nu, S
 
 
 def information_contribution(y: Any, H: Any, R: Any) -> tuple[Any, Any]:
-    """Information carried by one measurement: ``J = H' R⁻¹ H`` and ``j = H' R⁻¹ y`` (SPEC §2.2, eq. 17).
+    """Information carried by one measurement: ``J = H' R⁻¹ H`` and ``j = H' R⁻¹ y`` (docs/theory/cooperative.md §2.3).
 
     Independent of the state, so it is computed for all steps of a trajectory at once (numpy batched).
     """
@@ -139,15 +140,16 @@ def information_contribution(y: Any, H: Any, R: Any) -> tuple[Any, Any]:
 
 
 def information_update(x: Any, P: Any, J: Any, j: Any) -> tuple[Any, Any]:
-    """Measurement update in information form (SPEC §2.2, eq. 17).
+    """Measurement update in information form (docs/theory/cooperative.md, eq. cooperative.9).
 
     ``P⁺ = (P⁻¹ + J)⁻¹`` and ``x⁺ = P⁺ (P⁻¹ x + j)``, equal to :func:`update` for the optimal gain, with
     only ``n × n`` inverses left in the sequential recursion (``J, j`` from
     :func:`information_contribution`).
     """
     P_inv = inverse(P)
-    P_post = symmetrize(inverse(P_inv + J))  # SPEC §2.2, eq. 17
-    x_post = P_post @ (P_inv @ x + j)  # SPEC §2.2, eq. 16 with K = P⁺ H' R⁻¹
+    P_post = symmetrize(inverse(P_inv + J))  # docs/theory/cooperative.md, eq. cooperative.9
+    # docs/theory/cooperative.md, eq. cooperative.9 (eq. cooperative.7 with K = P⁺ H' R⁻¹)
+    x_post = P_post @ (P_inv @ x + j)
     return x_post, P_post
 
 

@@ -1,9 +1,11 @@
-"""Jacobi transform of an N-platform formation (SPEC §2.6, seed §V-A, eqs. 38-40), for any N ≥ 2.
+"""Jacobi transform of an N-platform formation (docs/theory/formation_control.md §1), for any N ≥ 2.
+
+Source: Zhang & Leonard (2010), §V-A, eqs. 38-40 (for N = 4).
 
 Positions ``r`` of shape ``(..., N, 2)`` map to the centre ``r_c`` ``(..., 2)`` and the Jacobi vectors
 ``q`` ``(..., N−1, 2)`` by ``[r_c, q_1, …, q_{N−1}] = [r_1, …, r_N] Ψ`` with ``Ψ = [1/N, Q]``, where the
 columns of ``Q`` (N × (N−1)) are orthonormal and orthogonal to ``1``. Then ``Ψ⁻¹ = [1, Q]'`` and for unit
-masses the kinetic energy splits exactly (SPEC §2.6):
+masses the kinetic energy splits exactly (docs/theory/formation_control.md, eq. formation_control.3):
 
     ½ Σ_i ‖r_i'‖² = ½ N ‖r_c'‖² + ½ Σ_j ‖q_j'‖² ,
 
@@ -12,12 +14,12 @@ Newton's equations ``r_i'' = f_i`` become ``N r_c'' = f_c`` and ``q_j'' = u_j`` 
 ``u_j = Σ_i Q_ij f_i``; back, ``f_i = f_c/N + Σ_j Q_ij u_j``. Shape forces (``f_c = 0``) sum to zero and
 leave the centre's motion untouched.
 
-Construction of ``Q`` (choice; the seed only requires that Ψ decouple the kinetic energy): a binary
+Construction of ``Q`` (choice; the paper only requires that Ψ decouple the kinetic energy): a binary
 *cluster tree* over the platforms. Each internal node joining clusters A (m platforms) and B (n
 platforms) contributes the Jacobi vector ``q = √(mn/(m+n)) (mean_B r − mean_A r)``; the N − 1 internal
 nodes, in post-order (left subtree, right subtree, node), are ``q_1 … q_{N−1}``. These columns are
 orthonormal and orthogonal to ``1`` for every tree. The default tree bisects the platform list and
-mirrors the second half, which for N = 4 is ``((1, 2), (4, 3))`` and reproduces the seed's eq. 38
+mirrors the second half, which for N = 4 is ``((1, 2), (4, 3))`` and reproduces the paper's eq. 38
 exactly: ``q1 = (r2 − r1)/√2``, ``q2 = (r3 − r4)/√2``, ``q3 = ½(r4 + r3 − r2 − r1)``; for N = 2 it is
 ``q1 = (r2 − r1)/√2``. Any other tree (nested tuples of 0-based indices) can be passed.
 """
@@ -53,7 +55,7 @@ def _leaves(tree: ClusterTree) -> list[int]:
 
 
 def jacobi_matrix(n_platforms: int, tree: ClusterTree | None = None) -> np.ndarray:
-    """The Jacobi transform ``Ψ = [1/N, Q]`` of a cluster tree (SPEC §2.6).
+    """The Jacobi transform ``Ψ = [1/N, Q]`` of a cluster tree (eqs. formation_control.1–2).
 
     Parameters
     ----------
@@ -93,7 +95,7 @@ def jacobi_matrix(n_platforms: int, tree: ClusterTree | None = None) -> np.ndarr
 
 @dataclass(frozen=True)
 class JacobiTransform:
-    """Centre and Jacobi vectors of a formation, and the equivalent forces (SPEC §2.6, eqs. 38-40).
+    """Centre and Jacobi vectors of a formation, and the equivalent forces (docs/theory/formation_control.md §1).
 
     Parameters
     ----------
@@ -135,12 +137,12 @@ class JacobiTransform:
         return x
 
     def to_jacobi(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``[r_c, q] = [r] Ψ`` (SPEC §2.6): ``(..., N, 2)`` → centre ``(..., 2)``, ``q`` ``(..., N−1, 2)``.
+        """``[r_c, q] = [r] Ψ`` (eq. formation_control.1): ``(..., N, 2)`` → ``r_c (..., 2)``, ``q (..., N−1, 2)``.
 
         Linear, so it maps velocities and accelerations the same way.
         """
         r = self._check(positions, self.n_platforms, "positions")
-        X = np.swapaxes(self.matrix, 0, 1) @ r  # rows: r_c, q_1, …  (SPEC §2.6, [r_c, q] = [r] Ψ)
+        X = np.swapaxes(self.matrix, 0, 1) @ r  # rows: r_c, q_1, …  (eq. formation_control.1, [r_c, q] = [r] Ψ)
         return X[..., 0, :], X[..., 1:, :]
 
     def from_jacobi(self, center: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -149,7 +151,7 @@ class JacobiTransform:
         return np.asarray(center, dtype=float)[..., None, :] + self.directions @ q  # [r] = [r_c, q] Ψ⁻¹
 
     def forces_to_jacobi(self, forces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``[f_c, u] = [f] Ψ^{-T}`` (SPEC §2.6, eq. 40): total force (..., 2), ``u`` (..., N−1, 2)."""
+        """``[f_c, u] = [f] Ψ^{-T}`` (eq. formation_control.4): total force (..., 2), ``u`` (..., N−1, 2)."""
         f = self._check(forces, self.n_platforms, "forces")
         return f.sum(axis=-2), np.swapaxes(self.directions, 0, 1) @ f  # f_c = Σ f_i, u_j = Σ_i Q_ij f_i
 

@@ -1,4 +1,4 @@
-"""Level-curve tracking of the formation centre (SPEC §2.7, seed §VI, eqs. 44-48).
+"""Level-curve tracking of the formation centre (docs/theory/level_curve.md; Zhang & Leonard (2010), §VI, eqs. 44-48).
 
 The centre is a Newtonian particle ``r_c'' = a_c`` (unit mass; the formation's total force is
 ``f_c = N a_c``, :mod:`mobisense.formation.jacobi`). In Frenet–Serret form, with speed ``α = ‖r_c'‖``, unit velocity
@@ -11,11 +11,11 @@ Then ``z' = −α ‖∇z‖ sin θ`` and
 
     θ' = α (κ1 cos θ + κ2 sin θ − u_c),   κ1 = −x1'∇²z x1/‖∇z‖,   κ2 = +x1'∇²z y1/‖∇z‖.
 
-Sign of κ2 (our derivation; the OCR of the seed and SPEC §2.7 print a minus): θ is the angle from x2 to
-x1, the direction of x1 turns at ``−α x1'∇²z x2/‖∇z‖`` along the path, and ``x2 = cos θ x1 − sin θ y1``
-gives ``+x1'∇²z y1`` in front of ``sin θ``. :func:`heading_rate` is checked against finite differences
-of θ along arbitrary paths in ``tests/test_formation_level_curve.py``; with the printed sign the Lyapunov
-function below would not be monotone. κ1 is the signed curvature of the level curve followed along x1.
+Sign of κ2 (our derivation; Zhang & Leonard (2010), §VI-A, print a minus; docs/theory/level_curve.md §3.1): θ is the
+angle from x2 to x1, the direction of x1 turns at ``−α x1'∇²z x2/‖∇z‖`` along the path, and ``x2 = cos θ x1 − sin θ y1``
+gives ``+x1'∇²z y1`` in front of ``sin θ``. :func:`heading_rate` is checked against finite differences of θ along
+arbitrary paths in ``tests/test_formation_level_curve.py``; with the printed sign the Lyapunov function below would not
+be monotone. κ1 is the signed curvature of the level curve followed along x1.
 
 Steering law (eq. 48) for a level ``C`` and ``f = dh/dz`` (:data:`LEVEL_FUNCTIONS`):
 
@@ -52,7 +52,7 @@ __all__ = [
 
 
 class LevelFunction(ABC):
-    """``h(z)`` with ``h(C) = 0``, ``h → ∞`` at the field's extrema, and ``f = dh/dz`` (seed A1-A3)."""
+    """``h(z)`` with ``h(C) = 0``, ``h → ∞`` at the field's extrema, ``f = dh/dz`` (the paper's (A1)–(A3))."""
 
     #: registry key used in scenario files
     kind: str = ""
@@ -122,7 +122,7 @@ class ReciprocalLevel(LevelFunction):
 
 
 def heading_error(velocity: np.ndarray, gradient: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Speed ``α`` and heading error ``θ ∈ (−π, π]`` (SPEC §2.7) for velocities and gradients ``(..., 2)``."""
+    """Speed ``α`` and heading error ``θ ∈ (−π, π]`` (eq. level_curve.3) for velocities and gradients ``(..., 2)``."""
     alpha = np.linalg.norm(velocity, axis=-1)
     x2 = np.asarray(velocity, dtype=float) / alpha[..., None]
     x1, y1, _ = level_curve_frame(np.asarray(gradient, dtype=float))
@@ -131,7 +131,7 @@ def heading_error(velocity: np.ndarray, gradient: np.ndarray) -> tuple[np.ndarra
 
 
 def curvature_terms(gradient: np.ndarray, hessian: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``κ1 = −x1'∇²z x1/‖∇z‖`` and ``κ2 = x1'∇²z y1/‖∇z‖`` (SPEC §2.7; sign of κ2 in the module notes)."""
+    """``κ1 = −x1'∇²z x1/‖∇z‖`` and ``κ2 = x1'∇²z y1/‖∇z‖`` (eq. level_curve.4; sign of κ2 in the module notes)."""
     x1, y1, norm = level_curve_frame(np.asarray(gradient, dtype=float))
     Hx1 = (np.asarray(hessian, dtype=float) @ x1[..., None])[..., 0]
     return -np.sum(x1 * Hx1, axis=-1) / norm, np.sum(y1 * Hx1, axis=-1) / norm
@@ -140,20 +140,22 @@ def curvature_terms(gradient: np.ndarray, hessian: np.ndarray) -> tuple[np.ndarr
 def heading_rate(
     alpha: np.ndarray, theta: np.ndarray, kappa1: np.ndarray, kappa2: np.ndarray, path_curvature: np.ndarray
 ) -> np.ndarray:
-    """``θ' = α (κ1 cos θ + κ2 sin θ − u_c)`` (SPEC §2.7)."""
+    """``θ' = α (κ1 cos θ + κ2 sin θ − u_c)`` (docs/theory/level_curve.md, eq. level_curve.4)."""
     return alpha * (kappa1 * np.cos(theta) + kappa2 * np.sin(theta) - path_curvature)
 
 
 @dataclass(frozen=True)
 class LevelCurveController:
-    """Speed and steering control of the centre along the level ``z = C`` (SPEC §2.7, eq. 48).
+    """Speed and steering control of the centre along the level ``z = C`` (docs/theory/level_curve.md §4).
+
+    Source: Zhang & Leonard (2010), eq. 48.
 
     Parameters
     ----------
     level_function : LevelFunction
         ``h`` and ``f`` for the level ``C`` (``level_function.level``).
     speed : float
-        Desired speed ``α_d`` (L/T); the seed uses 1.
+        Desired speed ``α_d`` (L/T); the paper uses 1.
     speed_gain : float
         ``K1`` (1/T).
     steering_gain : float
@@ -186,7 +188,7 @@ class LevelCurveController:
             + kappa2 * np.sin(theta)
             - 2 * f * norm * np.cos(theta / 2) ** 2
             + self.steering_gain * np.sin(theta / 2)
-        )  # SPEC §2.7, eq. 48
+        )  # docs/theory/level_curve.md, eq. level_curve.6
 
     def __call__(
         self, velocity: np.ndarray, z: np.ndarray, gradient: np.ndarray, hessian: np.ndarray
@@ -202,12 +204,12 @@ class LevelCurveController:
         """
         alpha, theta = heading_error(velocity, gradient)
         x2 = np.asarray(velocity, dtype=float) / alpha[..., None]
-        v_c = -self.speed_gain * (alpha - self.speed)  # SPEC §2.7, α' = v_c (eq. 45)
+        v_c = -self.speed_gain * (alpha - self.speed)  # eq. level_curve.7 (α' = v_c, the paper's eq. 45)
         u_c = self.steering(z, gradient, hessian, theta)
         return v_c[..., None] * x2 + (alpha**2 * u_c)[..., None] * perp(x2)  # eqs. 44-47
 
     def lyapunov(self, theta: np.ndarray, z: np.ndarray) -> np.ndarray:
-        """``V = −log cos²(θ/2) + h(z)`` (seed Prop. 6.1)."""
+        """``V = −log cos²(θ/2) + h(z)`` (eq. level_curve.9; Zhang & Leonard (2010), Proposition 6.1)."""
         return -np.log(np.cos(np.asarray(theta) / 2) ** 2) + self.level_function.h(z)
 
     def lyapunov_rate(self, alpha: np.ndarray, theta: np.ndarray) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Newtonian platforms ``r_i'' = f_i`` (unit mass) with optional force and speed limits (SPEC §2.6).
+"""Newtonian platforms ``r_i'' = f_i`` (unit mass) with force and speed limits (docs/theory/formation_control.md §5).
 
 :class:`PlatformLimits` turns the commanded forces into the applied ones:
 

@@ -1,9 +1,11 @@
-"""Formation shape and orientation controllers on the Jacobi vectors (SPEC §2.6, seed §V, eqs. 41-43).
+"""Formation shape and orientation controllers on the Jacobi vectors (docs/theory/formation_control.md §2–§3).
+
+Source: Zhang & Leonard (2010), §V, eqs. 41-43.
 
 After the Jacobi transform (:mod:`mobisense.formation.jacobi`) the shape dynamics are N − 1 decoupled double
 integrators ``q_j'' = u_j``, independent of the centre. Two controllers:
 
-* :class:`FixedShapeController` — ``u_j = q_j^d'' − K2 (q_j − q_j^d) − K3 (q_j' − q_j^d')``: the seed's
+* :class:`FixedShapeController` — ``u_j = q_j^d'' − K2 (q_j − q_j^d) − K3 (q_j' − q_j^d')``: the paper's
   law ``u_j = −K2 (q_j − q_j^d) − K3 q_j'`` plus a feed-forward of the desired motion (zero for a constant
   shape). The error ``e = q − q^d`` obeys ``e'' + K3 e' + K2 e = 0`` exactly — exponential for
   ``K2, K3 > 0``.
@@ -50,7 +52,9 @@ def shape_error(q: np.ndarray, q_desired: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class FixedShapeController:
-    """PD control of the Jacobi vectors to a desired shape (SPEC §2.6, seed §V-A after eq. 41).
+    """PD control of the Jacobi vectors to a desired shape (docs/theory/formation_control.md §2).
+
+    Source: Zhang & Leonard (2010), §V-A after eq. 41.
 
     Parameters
     ----------
@@ -77,7 +81,8 @@ class FixedShapeController:
     ) -> np.ndarray:
         """Shape forces ``u`` ``(..., N−1, 2)`` for ``q``, ``q'`` and the desired ``q^d`` (and its rates)."""
         K2, K3 = self.stiffness, self.damping
-        return ddq_desired - K2 * (q - q_desired) - K3 * (dq - dq_desired)  # SPEC §2.6 (seed §V-A)
+        # docs/theory/formation_control.md, eq. formation_control.6
+        return ddq_desired - K2 * (q - q_desired) - K3 * (dq - dq_desired)
 
 
 def rotating_frame_state(
@@ -94,7 +99,9 @@ def rotating_frame_state(
 
 @dataclass(frozen=True)
 class RotatingShapeController:
-    """A formation rotating about its centre at a prescribed angular speed (SPEC §2.6, eqs. 42-43).
+    """A formation rotating about its centre at a prescribed angular speed (docs/theory/formation_control.md §3).
+
+    Source: Zhang & Leonard (2010), eqs. 42-43.
 
     Parameters
     ----------
@@ -148,8 +155,8 @@ class RotatingShapeController:
         """
         p, dp = rotating_frame_state(q, dq, psi, omega)
         omega_d, domega_d = self.desired_rate(t)
-        ddp = -self.shape_stiffness * (p - self.p_desired) - self.shape_damping * dp  # SPEC §2.6, eq. 43
-        domega = -self.angular_gain * (omega - omega_d) + domega_d  # SPEC §2.6, eq. 43
-        body = ddp + 2 * omega * perp(dp) - omega**2 * p + domega * perp(p)  # SPEC §2.6, eq. 42 (planar)
+        ddp = -self.shape_stiffness * (p - self.p_desired) - self.shape_damping * dp  # eq. formation_control.9
+        domega = -self.angular_gain * (omega - omega_d) + domega_d  # eq. formation_control.9
+        body = ddp + 2 * omega * perp(dp) - omega**2 * p + domega * perp(p)  # eq. formation_control.8 (planar)
         u = (rotation(psi) @ body[..., None])[..., 0]
         return u, omega, domega

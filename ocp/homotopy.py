@@ -1,4 +1,4 @@
-"""ε-continuation schedules (SPEC §1.3), shared by the direct and the indirect method.
+"""ε-continuation schedules (docs/theory/direct.md §5.2), shared by the direct and the indirect method.
 
 The driver calls ``attempt(eps)``, which tries to solve at ``eps`` starting from the last accepted
 solution and returns whether it succeeded (the caller keeps the accepted state). Modes:

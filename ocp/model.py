@@ -1,4 +1,4 @@
-"""Symbolic model of the mobile-sensor Kalman problem (SPEC §1.1): one implementation of each equation.
+"""Symbolic model of the mobile-sensor Kalman problem (docs/theory/ocp.md §1): one implementation of each equation.
 
 State vector ``x = [σ, p_1, …, p_N, v_1, …, v_N]`` and controls ``u = [u_1, …, u_N]`` as laid out by
 :class:`~mobisense.ocp.state_layout.StateLayout`.
@@ -202,7 +202,7 @@ class SensorKalmanModel:
         n, N = s.n, s.N
         Sigma, pos, vel = s.state.symbolic(x)
         S = self._information(pos, b)
-        # SPEC §1.1: Σ' = A Σ + Σ A' + B Q B' − Σ C' R(p)^-1 C Σ
+        # docs/theory/ocp.md, eq. ocp.7: Σ' = A Σ + Σ A' + B Q B' − Σ C' R(p)^-1 C Σ
         Sigma_dot = b["A"] @ Sigma + Sigma @ b["A"].T + b["BQB"] - Sigma @ S @ Sigma
         xdot = s.state.join_symbolic(Sigma_dot, vel, u)
         energy = 0.5 * b["alpha"] * ca.sumsqr(u)
@@ -226,7 +226,7 @@ class SensorKalmanModel:
         self.information = ca.Function("information", [p_sym, P], [ca.reshape(S_p, n * n, 1)], ["p", "P"], ["S"])
 
     def _information(self, positions: list[Any], b: dict[str, Any]) -> Any:
-        """S(p) = Σ_i C_i' diag(1/r_i(p_i)) C_i  (SPEC §1.1 with R block-diagonal)."""
+        """S(p) = Σ_i C_i' diag(1/r_i(p_i)) C_i  (docs/theory/ocp.md, eq. ocp.3, with R block-diagonal)."""
         s = self.structure
         S = ca.SX.zeros(s.n, s.n)
         for i in range(s.N):

@@ -64,7 +64,7 @@ def register_noise_model(cls: type[NoiseModel]) -> type[NoiseModel]:
 
 @register_noise_model
 class QuadraticRange(NoiseModel):
-    """Noise growing with squared range (SPEC §1.2): ``r = beta * |p - s|^2 + gamma``."""
+    """Noise growing with squared range (docs/theory/ocp.md, eq. ocp.4): ``r = beta * |p - s|^2 + gamma``."""
 
     model: Literal["quadratic_range"] = "quadratic_range"
     beta: PositiveFloat
@@ -77,7 +77,7 @@ class QuadraticRange(NoiseModel):
 
     @staticmethod
     def variance(p: Any, s: Any, theta: Any) -> Any:
-        """``beta * |p - s|^2 + gamma`` (SPEC §1.2)."""
+        """``beta * |p - s|^2 + gamma`` (docs/theory/ocp.md, eq. ocp.4)."""
         return theta[0] * ca.sumsqr(p - s) + theta[1]
 
 

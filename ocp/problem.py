@@ -1,4 +1,4 @@
-"""The mobile-sensor Kalman optimal-control problem (SPEC §1) and its YAML schema.
+"""The mobile-sensor Kalman optimal-control problem (docs/theory/ocp.md) and its YAML schema.
 
 A :class:`Problem` is a validated pydantic model (the YAML file is its serialisation) with numpy
 accessors for the matrices. Units are the user's: positions in length units L, time in T; the
@@ -134,7 +134,7 @@ class CollocationOptions(StrictModel):
 
 
 class HomotopyOptions(StrictModel):
-    """ε-continuation (SPEC §1.3): ``fixed`` steps of ``step``, ``adaptive`` steps, or ``none``."""
+    """ε-continuation (docs/theory/direct.md §5.2): ``fixed`` steps of ``step``, ``adaptive`` steps, or ``none``."""
 
     mode: HomotopyModeName = "fixed"
     step: float = Field(0.05, gt=0.0, le=1.0)
@@ -143,7 +143,9 @@ class HomotopyOptions(StrictModel):
 
 
 class BVPOptions(StrictModel):
-    """Indirect method (SPEC §1.4): BVP solver of the ε-continuation and of the direct-seeded refinement.
+    """Indirect method: BVP solver of the ε-continuation and of the direct-seeded refinement.
+
+    Theory: docs/theory/indirect.md §4.
 
     ``collocation`` uses the scheme and degree of ``solver.collocation`` on ``intervals`` uniform intervals
     (default: ``solver.collocation.intervals``), Newton to ``tolerance`` (max-norm of the scaled residual),
@@ -179,7 +181,7 @@ class SolverOptions(StrictModel):
 
 
 class Problem(StrictModel):
-    """A mobile-sensor Kalman optimal-control problem (SPEC §1.1) plus its solver options."""
+    """A mobile-sensor Kalman optimal-control problem (docs/theory/ocp.md §1–§2) plus its solver options."""
 
     name: str = Field(pattern=r"^[A-Za-z0-9_.\-]+$")
     horizon: Horizon
@@ -222,7 +224,7 @@ class Problem(StrictModel):
         return self.process.n_states
 
     @property
-    def N(self) -> int:  # noqa: N802  (SPEC symbol)
+    def N(self) -> int:  # noqa: N802  (the papers' symbol)
         """Number of sensors."""
         return len(self.sensors)
 

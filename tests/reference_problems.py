@@ -13,7 +13,7 @@ PROBLEMS = ROOT / "problems"
 
 
 def hussein2008(**solver: Any) -> dict[str, Any]:
-    """The paper's worked example (SPEC §1.5)."""
+    """The paper's worked example (Hussein (2008), §V; docs/theory/ocp.md §4)."""
     data = {
         "name": "hussein2008",
         "horizon": {"t0": 0.0, "tf": 10.0},
@@ -48,7 +48,7 @@ def with_solver(data: dict[str, Any], **solver: Any) -> dict[str, Any]:
 
 
 def scalar_steady_state(a: float, Q: float, r: float) -> float:
-    """Positive root of 2 a Σ + Q − Σ²/r = 0: Σ∞ = a r + sqrt(a² r² + Q r) (SPEC §1.5)."""
+    """Positive root of 2 a Σ + Q − Σ²/r = 0: Σ∞ = a r + sqrt(a² r² + Q r) (docs/theory/ocp.md, eq. ocp.14)."""
     return a * r + np.sqrt(a * a * r * r + Q * r)
 
 

@@ -1,8 +1,9 @@
-"""Cooperative Kalman filter with spatially correlated ("coloured") measurement noise (SPEC §2.2).
+"""Cooperative Kalman filter with spatially correlated ("coloured") measurement noise (docs/theory/cooperative.md §3).
 
 The noise ``w_k = w(r_{i,k})`` of a static random field sampled along the platform trajectories is
 modelled as first-order Markov, ``w_k = A^w w_{k−1} + η`` with ``A^w = V_k W_{k−1}⁻¹`` and
-``Q^w = W_k − A^w W_{k−1} A^w'`` (SPEC eqs. 10-12, :meth:`SpatialNoise.markov`). Two methods:
+``Q^w = W_k − A^w W_{k−1} A^w'`` (docs/theory/cooperative.md, eq. cooperative.11, :meth:`SpatialNoise.markov`).
+Two methods:
 
 ``augmented`` (default)
     State ``[s; w]`` of size ``3 + N``, measurement ``p = [C, I] [s; w] + D Ĥ + D e + n``: an exact
@@ -10,11 +11,11 @@ modelled as first-order Markov, ``w_k = A^w w_{k−1} + η`` with ``A^w = V_k W_
 ``differenced``
     Bryson–Henrikson: ``p̄_k = p_k − A^w p_{k−1} = (C_k A_{k−1} − A^w C_{k−1}) s_{k−1} + b_k + ν̄_k`` with
     ``b_k = C_k h_{k−1} + D_k Ĥ_k − A^w D_{k−1} Ĥ_{k−1}`` and
-    ``ν̄_k = C_k ε_{k−1} + η_{k−1} + v_k − A^w v_{k−1}`` (``v = D e + n``), SPEC eq. 18. The noise of
-    ``p̄_k`` is correlated with the process noise ``ε_{k−1}``; this is handled exactly by updating the
-    pair ``(s_{k−1}, ε_{k−1})`` and then propagating. Its covariance adds ``Q^w`` to the seed's eq. 19
-    (which omits η). The one approximation left is the seed's: ``v_{k−1}`` also enters ``p̄_{k−1}``,
-    a correlation the method ignores (exact when ``U = 0`` and ``R → 0``).
+    ``ν̄_k = C_k ε_{k−1} + η_{k−1} + v_k − A^w v_{k−1}`` (``v = D e + n``), docs/theory/cooperative.md,
+    eq. cooperative.13. The noise of ``p̄_k`` is correlated with the process noise ``ε_{k−1}``; this is handled exactly
+    by updating the pair ``(s_{k−1}, ε_{k−1})`` and then propagating. Its covariance adds ``Q^w`` to
+    Zhang & Leonard (2010), eq. 19 (which omits η). The one approximation left is the paper's: ``v_{k−1}`` also enters
+    ``p̄_{k−1}``, a correlation the method ignores (exact when ``U = 0`` and ``R → 0``).
 
 Both return a :class:`~mobisense.estimation.cooperative.filter.CooperativeFilterResult` for ``s`` and are batched
 like :func:`~mobisense.estimation.cooperative.filter.run_cooperative_filter`.
@@ -60,7 +61,7 @@ def run_coloured_filter(
     hessians: np.ndarray | None = None,
     method: Literal["augmented", "differenced"] = "augmented",
 ) -> CooperativeFilterResult:
-    """Cooperative Kalman filter for ``p = C s + D Ĥ + w + D e + n`` with correlated ``w`` (SPEC §2.2).
+    """Cooperative Kalman filter for ``p = C s + D Ĥ + w + D e + n``, correlated ``w`` (docs/theory/cooperative.md §3).
 
     Parameters
     ----------
@@ -110,7 +111,7 @@ def _step_model(positions: np.ndarray, hessians: np.ndarray, noise: CooperativeN
     }
     if k > 0:
         shift = formation_center(pos) - formation_center(positions[..., k - 1, :, :])
-        model["A"] = transition_matrix(shift)  # SPEC §2.1, eq. 9
+        model["A"] = transition_matrix(shift)  # docs/theory/cooperative.md, eq. cooperative.5
         model["h"] = hessian_drift(hessians[..., k - 1, :, :], shift)[..., None]
     return model
 
@@ -133,7 +134,7 @@ def _augmented_steps(
         m = _step_model(positions, H, noise, k)
         if k > 0:
             A_w, Q_w = spatial.markov(positions[..., k, :, :], positions[..., k - 1, :, :])
-            F = _block_diag(m["A"], A_w)  # [s; w] dynamics, SPEC §2.1 eq. 9 and §2.2 eq. 10
+            F = _block_diag(m["A"], A_w)  # [s; w] dynamics, docs/theory/cooperative.md, eq. cooperative.12
             Q = _block_diag(np.broadcast_to(noise.process, A_w.shape[:-2] + (3, 3)), Q_w)
             u = np.concatenate([m["h"], np.zeros(m["h"].shape[:-2] + (N, 1))], axis=-2)
             x, P = kalman.predict(x, P, F, Q, u)
@@ -173,7 +174,8 @@ def _differenced_steps(
             xm, Pm = kalman.predict(x, P, m["A"], M, m["h"])
             out["xm"].append(xm[..., 0])
             out["Pm"].append(Pm)
-            # SPEC §2.2, eq. 18: p̄_k = C̄ s_{k−1} + b_k + C_k ε_{k−1} + η + v_k − A^w v_{k−1}
+            # docs/theory/cooperative.md, eq. cooperative.13:
+            # p̄_k = C̄ s_{k−1} + b_k + C_k ε_{k−1} + η + v_k − A^w v_{k−1}
             C_bar = m["C"] @ m["A"] - A_w @ previous["C"]
             b = (m["C"] @ m["h"])[..., 0] + m["DH"] - (A_w @ previous["DH"][..., None])[..., 0]
             p_bar = measurements[..., k, :] - (A_w @ measurements[..., k - 1, :, None])[..., 0]

@@ -29,7 +29,7 @@ __all__ = ["FormationFile", "ShapeBounds", "DesignStudy", "design_formation"]
 
 
 class ShapeBounds(StrictModel):
-    """Bounds ``[min, max]`` (L) of the half-distances a and b (SPEC §2.4, condition Cd4)."""
+    """Bounds ``[min, max]`` (L) of the half-distances a and b (docs/theory/steady_state.md §3, condition Cd4)."""
 
     a: list[PositiveFloat]
     b: list[PositiveFloat]
@@ -190,7 +190,9 @@ def _trace_grid(config: FormationFile) -> object:
     n = config.noise
     values = cross_trace(a[:, None], b[None, :], n.sigma_process, n.sigma_measurement, n.sigma_hessian)
     ds = xr.Dataset({"trace": (("a", "b"), values)}, coords={"a": a, "b": b})
-    ds["trace"].attrs["long_name"] = "tr P_inf(+) of the cross formation (SPEC 2.4, eq. 30)"
+    ds["trace"].attrs["long_name"] = (
+        "tr P_inf(+) of the cross formation (docs/theory/steady_state.md, eq. steady_state.5)"
+    )
     ds["a"].attrs["units"] = ds["b"].attrs["units"] = "length unit of the field"
     return ds
 

@@ -1,4 +1,4 @@
-"""Cooperative Kalman filter for N ≥ 3 platforms in any shape (SPEC §2.2, eqs. 13-17, case w = 0).
+"""Cooperative Kalman filter for N ≥ 3 platforms in any shape (docs/theory/cooperative.md §2, case w = 0).
 
 Three ways in, one set of equations (:mod:`mobisense.estimation.kalman`,
 :mod:`mobisense.estimation.cooperative.information_model`):
@@ -11,12 +11,11 @@ Three ways in, one set of equations (:mod:`mobisense.estimation.kalman`,
   runs, or ``(B, K, N, 2)`` per run; measurements ``(K, N)`` or ``(B, K, N)``. With shared positions
   the covariance recursion (independent of the data) runs once for the whole batch.
 
-The Hessian input ``Ĥ_{c,k}`` (SPEC §2.1) is either an array ``(..., K, 2, 2)`` (known or previously
-estimated), ``None`` (zero), or a :class:`HessianSource` called at each step (closed loop, e.g.
-:class:`mobisense.estimation.cooperative.hessian.CurvatureHessian`). A single run with array Hessians is rolled
-out by a CasADi function built from the same kernels (``engine="casadi"``, information form of eq. 17,
-JIT-compiled to C when a compiler is available), 5-10x faster than filterpy stepping the same model
-(``benchmarks/bench_filters.py``).
+The Hessian input ``Ĥ_{c,k}`` (docs/theory/cooperative.md, eq. cooperative.4) is either an array ``(..., K, 2, 2)``
+(known or previously estimated), ``None`` (zero), or a :class:`HessianSource` called at each step (closed loop, e.g.
+:class:`mobisense.estimation.cooperative.hessian.CurvatureHessian`). A single run with array Hessians is rolled out by a
+CasADi function built from the same kernels (``engine="casadi"``, information form of eq. 17, JIT-compiled to C when a
+compiler is available), 5-10x faster than filterpy stepping the same model (``benchmarks/bench_filters.py``).
 
 Note: the state equation carries the second-order value term ``½ Δr' Ĥ Δr`` in ``h`` (see
 :func:`~mobisense.estimation.cooperative.information_model.hessian_drift`), so it is exact on quadratic fields.
@@ -153,7 +152,7 @@ class CooperativeFilterResult:
 
 
 class CooperativeKalmanFilter:
-    """Step-by-step cooperative Kalman filter (SPEC §2.2), batched over leading dimensions.
+    """Step-by-step cooperative Kalman filter (docs/theory/cooperative.md §2), batched over leading dimensions.
 
     Parameters
     ----------
@@ -194,9 +193,10 @@ class CooperativeKalmanFilter:
             )
 
     def predict(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Move the estimate to the centre of ``positions`` ``(..., N, 2)`` (SPEC §2.2, eqs. 13-14).
+        """Move the estimate to the centre of ``positions`` ``(..., N, 2)`` (docs/theory/cooperative.md §2.1).
 
-        Uses the current Hessian estimate for ``h_{k−1} = [0; Ĥ_{k−1} Δr]``. Returns the prior state
+        Uses the current Hessian estimate for ``h_{k−1} = [½ Δr' Ĥ_{k−1} Δr; Ĥ_{k−1} Δr]`` (eq. cooperative.5:
+        the paper's first-order ``[0; Ĥ Δr]`` plus the second-order value term). Returns the prior state
         ``(..., 3)`` and covariance ``(..., 3, 3)``.
         """
         positions = np.asarray(positions, dtype=float)
@@ -238,7 +238,7 @@ def check_filter_inputs(positions: np.ndarray, measurements: np.ndarray) -> None
     if positions.shape[-2] < 3:
         raise ValueError(
             f"positions: the cooperative filter needs N >= 3 platforms, got {positions.shape[-2]} "
-            "(N = 2 needs a rotating formation and Hessian input from elsewhere; see SPEC §2.3)"
+            "(N = 2 needs a rotating formation and Hessian input from elsewhere; see docs/theory/cooperative.md §4)"
         )
 
 
@@ -254,11 +254,13 @@ def model_sequence(positions: np.ndarray, hessians: np.ndarray, noise: Cooperati
     Q = np.broadcast_to(noise.process, shifts.shape[:-1] + (3, 3)).copy()
     Q[..., 0, :, :] = 0.0
     return {
-        "F": transition_matrix(shifts),  # SPEC §2.1, eq. 9
-        "u": hessian_drift(previous_hessians, shifts)[..., None],  # h_{k−1}, SPEC §2.1, eq. 9
+        "F": transition_matrix(shifts),  # docs/theory/cooperative.md, eq. cooperative.5
+        # h_{k−1}, docs/theory/cooperative.md, eq. cooperative.5
+        "u": hessian_drift(previous_hessians, shifts)[..., None],
         "Q": Q,
         "C": C,
-        "DH": (D @ hessian_to_vec(hessians)[..., None])[..., 0],  # D_k Ĥ_{c,k}, SPEC §2.1, eq. 7
+        # D_k Ĥ_{c,k}, docs/theory/cooperative.md, eq. cooperative.4
+        "DH": (D @ hessian_to_vec(hessians)[..., None])[..., 0],
         "R": noise.total_measurement_covariance(D),
         "centers": centers,
     }
@@ -371,7 +373,7 @@ def run_cooperative_filter(
     engine: Literal["auto", "numpy", "casadi"] = "auto",
     initial_hessian: np.ndarray | None = None,
 ) -> CooperativeFilterResult:
-    """Run the cooperative Kalman filter over a trajectory (SPEC §2.2, eqs. 13-17).
+    """Run the cooperative Kalman filter over a trajectory (docs/theory/cooperative.md §2, eqs. cooperative.6–9).
 
     Parameters
     ----------

@@ -1,13 +1,13 @@
-"""Formation shape design (SPEC §2.4-2.5): minimise the filter covariance over the cross's (a, b).
+"""Formation shape design (docs/theory/steady_state.md §3, §5): minimise the filter covariance over the cross's (a, b).
 
 * :func:`design_cross_formation` — minimise ``tr P∞(a, b)`` (closed form, CasADi derivatives) within
   bounds ``[d_min, d_max]`` or along ``a = b``;
-* :func:`adaptive_shape_step` — step (3A) of SPEC §2.4: choose ``(a, b)`` at step k to minimise
-  ``J_k = ½ tr[(I − K C) P(−) (I − K C)' + K (D U D' + R) K']`` with the Kalman gain ``K(C, D)``;
+* :func:`adaptive_shape_step` — step (3A) of docs/theory/steady_state.md §5 (eq. steady_state.7): choose ``(a, b)``
+  at step k to minimise ``J_k = ½ tr[(I − K C) P(−) (I − K C)' + K (D U D' + R) K']`` with the Kalman gain ``K(C, D)``;
 * :func:`minimise_shape` — the bounded two-variable minimiser both use, returning a :class:`ShapeDesign`
   that states whether the optimum is an interior ``minimum``, a ``saddle`` or on a ``boundary``.
 
-The pitfall of SPEC §2.4: ``tr P∞`` often keeps decreasing as one of ``a, b → ∞`` and its symmetric
+The pitfall of docs/theory/steady_state.md §3: ``tr P∞`` often keeps decreasing as one of ``a, b → ∞`` and its symmetric
 stationary point is a saddle, so an unbounded search has no answer; :func:`minimise_shape` starts from a
 grid (multi-start L-BFGS-B with the exact gradient), polishes the best point by Newton's method on the
 free variables with the exact Hessian, and classifies it from the active bounds and the eigenvalues of
@@ -185,7 +185,7 @@ def design_cross_formation(
     bounds: tuple[tuple[float, float], tuple[float, float]],
     equal_sides: bool = False,
 ) -> ShapeDesign:
-    """Cross formation ``(a, b)`` minimising ``tr P∞`` (SPEC §2.4, Prop. 3.14) within bounds.
+    """Cross formation ``(a, b)`` minimising ``tr P∞`` (docs/theory/steady_state.md §2–§3) within bounds.
 
     The result also carries ``steady_state`` (:class:`~mobisense.estimation.cooperative.steady_state.SteadyState` at the
     optimum: ``P∞`` diagonal, gain ``K∞``).
@@ -203,7 +203,7 @@ def design_cross_formation(
 
 
 def cross_taylor_symbolic(a: Any, b: Any, orientation: Any) -> tuple[Any, Any]:
-    """CasADi ``C (4×3)`` and ``D (4×4)`` of the cross rotated by ``orientation`` (SPEC §2.1, eqs. 4-5).
+    """CasADi ``C (4×3)``, ``D (4×4)`` of the cross rotated by ``orientation`` (eq. cooperative.2).
 
     Same rows as :func:`mobisense.estimation.cooperative.information_model.taylor_matrices` of
     :func:`~mobisense.estimation.cooperative.information_model.cross_formation` (tested), as expressions of ``a, b``.
@@ -215,8 +215,8 @@ def cross_taylor_symbolic(a: Any, b: Any, orientation: Any) -> tuple[Any, Any]:
     rows_C, rows_D = [], []
     for bx, by in body:
         x, y = c * bx - s * by, s * bx + c * by  # r_i − r_c = R(θ) body_i
-        rows_C.append(ca.horzcat(1, x, y))  # SPEC §2.1, eq. 4
-        rows_D.append(0.5 * ca.horzcat(x * x, x * y, y * x, y * y))  # SPEC §2.1, eq. 5
+        rows_C.append(ca.horzcat(1, x, y))  # docs/theory/cooperative.md, eq. cooperative.2
+        rows_D.append(0.5 * ca.horzcat(x * x, x * y, y * x, y * y))  # docs/theory/cooperative.md, eq. cooperative.2
     return ca.vertcat(*rows_C), ca.vertcat(*rows_D)
 
 
@@ -231,9 +231,9 @@ def _adaptive_objective() -> Any:
     theta = ca.SX.sym("theta")
     C, D = cross_taylor_symbolic(x[0], x[1], theta)
     R_total = D @ U @ D.T + R
-    K = ca.solve(C @ P @ C.T + R_total, C @ P).T  # K(C, D), SPEC §2.2, eq. 15
+    K = ca.solve(C @ P @ C.T + R_total, C @ P).T  # K(C, D), docs/theory/cooperative.md, eq. cooperative.7
     I_KC = ca.SX.eye(3) - K @ C
-    J = 0.5 * ca.trace(I_KC @ P @ I_KC.T + K @ R_total @ K.T)  # SPEC §2.4, step (3A)
+    J = 0.5 * ca.trace(I_KC @ P @ I_KC.T + K @ R_total @ K.T)  # docs/theory/steady_state.md, eq. steady_state.7
     H, g = ca.hessian(J, x)
     return ca.Function("adaptive_J", [x, P, R, U, theta], [J, g, H])
 
@@ -245,7 +245,7 @@ def adaptive_shape_step(
     orientation: float = 0.0,
     equal_sides: bool = False,
 ) -> ShapeDesign:
-    """Step (3A) of SPEC §2.4: the cross shape minimising ``J_k`` given ``P_k(−)``.
+    """Step (3A) of docs/theory/steady_state.md §5: the cross shape minimising ``J_k`` given ``P_k(−)``.
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""Sliding-window controllability and observability Gramians of the information model (SPEC §2.3).
+"""Sliding-window controllability and observability Gramians of the information model (docs/theory/cooperative.md §4).
 
 For a trajectory of formation positions, :func:`gramians` evaluates at every step k ≥ τ
 
@@ -58,7 +58,7 @@ class Gramians:
 
 
 def gramians(positions: np.ndarray, noise: CooperativeNoise, window: int) -> Gramians:
-    """Controllability and observability Gramians over a sliding window (SPEC §2.3).
+    """Controllability and observability Gramians over a sliding window (docs/theory/cooperative.md §4).
 
     Parameters
     ----------

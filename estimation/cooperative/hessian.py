@@ -1,4 +1,4 @@
-"""Cooperative Hessian estimation (SPEC §2.5): one-step filter, least squares, level-curve curvature.
+"""Cooperative Hessian estimation (docs/theory/hessian.md): one-step filter, least squares, level-curve curvature.
 
 * :func:`one_step_filter` — eq. 33: blend the predicted platform values with new measurements;
 * :func:`least_squares_hessian` — the Hessian from the Taylor equations when the formation allows it;
@@ -10,19 +10,19 @@
 
 All functions are batched over leading dimensions.
 
-Choices where the seed is ambiguous (documented and tested):
+Choices where Zhang & Leonard (2010) is ambiguous (documented and tested; see docs/theory/departures.md):
 
-* The prediction in eq. 33 uses ``s_k(−)`` and ``P_k(−)`` at the *new* centre (the seed writes
+* The prediction in eq. 33 uses ``s_k(−)`` and ``P_k(−)`` at the *new* centre (the paper writes
   ``s_{k−1}(+)``, which is biased by ``Δr·∇z`` when the formation moves; both agree when it does not),
-  and its error covariance includes the Hessian term: ``G = C P(−) C' + D U D'`` (the seed's ``C P C'``
+  and its error covariance includes the Hessian term: ``G = C P(−) C' + D U D'`` (the paper's ``C P C'``
   would trust a poor previous ``Ĥ`` as exact, and the Hessian estimate could never move away from it).
-* The seed's ``D'D`` is singular for every N because ``vec(H)`` repeats ``H12``; the least squares here
+* The paper's ``D'D`` (§IV-B) is singular for every N because ``vec(H)`` repeats ``H12``; the least squares here
   solve for the three distinct entries ``(H11, H12, H22)`` and need the ``N × 3`` design
   ``[x²/2, xy, y²/2]`` to have rank 3 (not true for the cross, whose platforms sit on two axes — hence
   the curvature method) or, without a state estimate, ``N ≥ 6`` for the joint fit of ``z, ∇z, H``.
 * (s.3) moves along the gradient to the level curve by solving the *quadratic* Taylor model along that
-  line (the seed's linear step leaves an O(a²) offset); (s.6)-(s.7) use signed angles and arc positions
-  and the three-point derivative through ``r_J, r_c, r_K`` (equal to the seed's averages for a symmetric
+  line (the paper's linear step leaves an O(a²) offset); (s.6)-(s.7) use signed angles and arc positions
+  and the three-point derivative through ``r_J, r_c, r_K`` (equal to the paper's averages for a symmetric
   formation, second-order accurate otherwise).
 """
 
@@ -49,7 +49,7 @@ __all__ = [
 def one_step_filter(
     predicted: np.ndarray, prediction_covariance: np.ndarray, measurements: np.ndarray, noise_covariance: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Noise-reduced platform values (SPEC §2.5, eq. 33).
+    """Noise-reduced platform values (docs/theory/hessian.md, eq. hessian.2; Zhang & Leonard (2010), eq. 33).
 
     Parameters
     ----------
@@ -77,8 +77,9 @@ def one_step_filter(
     G, Sigma = prediction_covariance, noise_covariance
     total = G + Sigma
     weights_pred = np.linalg.solve(total, np.stack([predicted, measurements], axis=-1))  # (G + Σ)⁻¹ [ẑ, p]
-    filtered = (Sigma @ weights_pred[..., :1] + G @ weights_pred[..., 1:])[..., 0]  # SPEC §2.5, eq. 33
-    covariance = Sigma @ np.linalg.solve(total, G)  # SPEC §2.5, Prop. 4.1
+    # docs/theory/hessian.md, eq. hessian.2
+    filtered = (Sigma @ weights_pred[..., :1] + G @ weights_pred[..., 1:])[..., 0]
+    covariance = Sigma @ np.linalg.solve(total, G)  # docs/theory/hessian.md, eq. hessian.3
     return filtered, 0.5 * (covariance + np.swapaxes(covariance, -1, -2))
 
 
@@ -106,7 +107,7 @@ def _lstsq(A: np.ndarray, b: np.ndarray, what: str) -> np.ndarray:
 def least_squares_hessian(
     positions: np.ndarray, values: np.ndarray, state: np.ndarray | None = None
 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
-    """Hessian at the formation centre from the Taylor equations (SPEC §2.5, after eq. 34).
+    """Hessian at the formation centre from the Taylor equations (docs/theory/hessian.md §2, eq. hessian.4).
 
     Parameters
     ----------
@@ -138,7 +139,7 @@ def _three_point_slope(s1: np.ndarray, f1: np.ndarray, s2: np.ndarray, f2: np.nd
     return (f1 * s2**2 - f2 * s1**2) / (s1 * s2 * (s2 - s1))
 
 
-#: the seed's triangles (Fig. 2): E = {1, 3, 4} and F = {2, 3, 4}, zero-based
+#: the triangles of Zhang & Leonard (2010), Fig. 2: E = {1, 3, 4} and F = {2, 3, 4}, zero-based
 _TRIANGLES = ((0, 2, 3), (1, 2, 3))
 
 
@@ -170,12 +171,12 @@ def curvature_hessian(
     initial_hessian: np.ndarray,
     iterations: int = 3,
 ) -> np.ndarray:
-    """Hessian of a four-platform formation from level-curve curvature (SPEC §2.5, steps s.1-s.8).
+    """Hessian of a four-platform formation from level-curve curvature (docs/theory/hessian.md §4, steps s.1-s.8).
 
     Parameters
     ----------
     positions : ndarray, shape (..., 4, 2)
-        Platforms in the seed's order: 1, 2 on one axis, 3, 4 on the other (the cross).
+        Platforms in the paper's order: 1, 2 on one axis, 3, 4 on the other (the cross).
     values : ndarray, shape (..., 4)
         Filtered platform values ``z̃`` (eq. 33).
     state : ndarray, shape (..., 3)
@@ -207,12 +208,12 @@ def curvature_hessian(
         for _ in range(iterations):
             (r_J, d_J), (r_K, d_K) = (_level_curve_point(positions, values, H, z_c, tri) for tri in _TRIANGLES)
             s_J, s_K = np.einsum("...i,...i->...", r_J - r_c, x1), np.einsum("...i,...i->...", r_K - r_c, x1)
-            # (s.6) signed angles of the gradient directions from y1: φ(s) with κ = dφ/ds (SPEC eq. 35)
+            # (s.6) signed angles of the gradient directions from y1: φ(s) with κ = dφ/ds (docs/theory/hessian.md §3)
             phi_J = np.arctan2(np.einsum("...i,...i->...", d_J, -x1), np.einsum("...i,...i->...", d_J, y1))
             phi_K = np.arctan2(np.einsum("...i,...i->...", d_K, -x1), np.einsum("...i,...i->...", d_K, y1))
             kappa = _three_point_slope(s_J, phi_J, s_K, phi_K)
-            H_xx = -g_c * kappa  # SPEC §2.5, eq. 36
-            # (s.7) H_xy = d‖∇z‖/ds, SPEC §2.5, eq. 37
+            H_xx = -g_c * kappa  # docs/theory/hessian.md, eq. hessian.7
+            # (s.7) H_xy = d‖∇z‖/ds, docs/theory/hessian.md, eq. hessian.5
             H_xy = _three_point_slope(s_J, np.linalg.norm(d_J, axis=-1) - g_c, s_K, np.linalg.norm(d_K, axis=-1) - g_c)
             # (s.8) ½ H_yy η_i² = z̃_i − z_c − ∇z_c·Δr_i − ½ H_xx ξ_i² − H_xy ξ_i η_i, least squares over i
             b = (

@@ -1,4 +1,4 @@
-"""Information dynamics of a moving formation (SPEC §2.1): the Taylor matrices C, D and the transition A.
+"""Information dynamics of a formation (docs/theory/cooperative.md §1): the Taylor matrices C, D and the transition A.
 
 The one implementation of the cooperative-exploration model used by every filter, Gramian and design
 tool of :mod:`estimation`. All functions are vectorised with the batch dimensions first: platform
@@ -6,7 +6,7 @@ positions have shape ``(..., N, 2)`` (length unit L of the field, e.g. km), so a
 trajectories ``(B, K, N, 2)`` goes through unchanged.
 
 State ``s = [z(r_c), ∂z/∂x(r_c), ∂z/∂y(r_c)]`` (field unit, field unit / L); Hessians are stored either
-as ``(..., 2, 2)`` matrices or in the seed's 4-vector form ``vec(H) = [H11, H21, H12, H22]`` (eq. 5).
+as ``(..., 2, 2)`` matrices or in the 4-vector form of Zhang & Leonard (2010) ``vec(H) = [H11, H21, H12, H22]`` (eq. 5).
 
 Example
 -------
@@ -37,7 +37,7 @@ __all__ = [
 
 
 def formation_center(positions: np.ndarray) -> np.ndarray:
-    """Formation centre ``r_c = mean_i r_i`` (SPEC §2.1).
+    """Formation centre ``r_c = mean_i r_i`` (docs/theory/cooperative.md §1.1).
 
     Parameters
     ----------
@@ -68,19 +68,20 @@ def taylor_matrices(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Returns
     -------
     C : ndarray, shape (..., N, 3)
-        Row i is ``[1, (r_i − r_c)']`` (SPEC §2.1, eq. 4).
+        Row i is ``[1, (r_i − r_c)']`` (docs/theory/cooperative.md, eq. cooperative.2).
     D : ndarray, shape (..., N, 4)
         Row i is ``½ ((r_i − r_c) ⊗ (r_i − r_c))'`` so that ``D vec(H)`` is the quadratic term (eq. 6).
     """
     dr = relative_positions(positions)
     ones = np.ones(dr.shape[:-1] + (1,))
-    C = np.concatenate([ones, dr], axis=-1)  # SPEC §2.1, eq. 4
-    D = 0.5 * (dr[..., :, None] * dr[..., None, :]).reshape(dr.shape[:-1] + (4,))  # SPEC §2.1, eq. 5-6
+    C = np.concatenate([ones, dr], axis=-1)  # docs/theory/cooperative.md, eq. cooperative.2
+    # docs/theory/cooperative.md, eq. cooperative.2
+    D = 0.5 * (dr[..., :, None] * dr[..., None, :]).reshape(dr.shape[:-1] + (4,))
     return C, D
 
 
 def hessian_to_vec(hessian: np.ndarray) -> np.ndarray:
-    """``vec(H) = [H11, H21, H12, H22]`` (SPEC §2.1, eq. 5) of ``(..., 2, 2)`` matrices, shape ``(..., 4)``.
+    """``vec(H) = [H11, H21, H12, H22]`` of ``(..., 2, 2)`` matrices, shape ``(..., 4)`` (eq. cooperative.3).
 
     Column-major stacking; for the row-major ``kron(Δr, Δr) = [x², xy, yx, y²]`` used in ``D`` this gives
     ``D vec(H) = ½ Δr' H Δr`` for any (even non-symmetric) H.
@@ -96,7 +97,7 @@ def vec_to_hessian(vec: np.ndarray) -> np.ndarray:
 
 
 def transition_matrix(center_shift: Any) -> Any:
-    """State transition ``A = [[1, Δr'], [0, I_2]]`` for a centre displacement Δr (SPEC §2.1, eq. 8-9).
+    """State transition ``A = [[1, Δr'], [0, I_2]]`` for a centre shift Δr (eq. cooperative.5).
 
     Parameters
     ----------
@@ -111,16 +112,17 @@ def transition_matrix(center_shift: Any) -> Any:
     if not isinstance(center_shift, (np.ndarray, list, tuple)):  # CasADi symbol: same matrix, symbolically
         import casadi as ca
 
-        return ca.blockcat([[ca.DM(1), center_shift.T], [ca.DM.zeros(2, 1), ca.DM.eye(2)]])  # SPEC §2.1, eq. 9
+        # docs/theory/cooperative.md, eq. cooperative.5
+        return ca.blockcat([[ca.DM(1), center_shift.T], [ca.DM.zeros(2, 1), ca.DM.eye(2)]])
     center_shift = np.asarray(center_shift, dtype=float)
     A = np.zeros(center_shift.shape[:-1] + (3, 3))
     A[..., 0, 0] = A[..., 1, 1] = A[..., 2, 2] = 1.0
-    A[..., 0, 1:] = center_shift  # SPEC §2.1, eq. 9
+    A[..., 0, 1:] = center_shift  # docs/theory/cooperative.md, eq. cooperative.5
     return A
 
 
 def hessian_drift(hessian: np.ndarray, center_shift: np.ndarray) -> np.ndarray:
-    """Known input ``h = [½ Δr' H Δr, (H Δr)']'`` of the state equation (SPEC §2.1, eq. 9), shape ``(..., 3)``.
+    """Known input ``h = [½ Δr' H Δr, (H Δr)']'`` of the state equation, shape ``(..., 3)`` (eq. cooperative.5).
 
     Parameters
     ----------
@@ -131,14 +133,14 @@ def hessian_drift(hessian: np.ndarray, center_shift: np.ndarray) -> np.ndarray:
 
     Notes
     -----
-    The seed (eq. 8) propagates the field value to first order only, ``h = [0; H Δr]``, leaving
+    Zhang & Leonard (2010), eq. 8, propagate the field value to first order only, ``h = [0; H Δr]``, leaving
     ``½ Δr' H Δr`` to the noise ``ε``. We keep that second-order term, known once ``Ĥ`` is: the state
     equation is then exact on quadratic fields (tested), and the two agree to O(‖Δr‖²).
     """
     center_shift = np.asarray(center_shift, dtype=float)
     Hdr = np.matmul(hessian, center_shift[..., None])[..., 0]
     half_curvature = 0.5 * np.sum(center_shift * Hdr, axis=-1, keepdims=True)  # ½ Δr' H Δr
-    return np.concatenate([half_curvature, Hdr], axis=-1)  # SPEC §2.1, eq. 9 (+ second-order value term)
+    return np.concatenate([half_curvature, Hdr], axis=-1)  # docs/theory/cooperative.md, eq. cooperative.5
 
 
 def rotation(angle: np.ndarray | float) -> np.ndarray:
@@ -154,7 +156,7 @@ def cross_formation(
     center: np.ndarray | None = None,
     orientation: np.ndarray | float = 0.0,
 ) -> np.ndarray:
-    """Positions of the four-platform cross (SPEC §2.4): 1, 2 at ∓a along e1, 3, 4 at ±b along e2.
+    """Positions of the four-platform cross (docs/theory/steady_state.md §2): 1, 2 at ∓a along e1, 3, 4 at ±b along e2.
 
     Parameters
     ----------

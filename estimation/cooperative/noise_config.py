@@ -1,8 +1,8 @@
-"""Noise covariances of the cooperative filter (SPEC §2.1-2.2): M, R and U, in Python and in YAML.
+"""Noise covariances of the cooperative filter (docs/theory/cooperative.md §1–§3): M, R and U, in Python and in YAML.
 
 :class:`CooperativeNoise` holds the three covariances as arrays; :class:`NoiseConfig` is the YAML form
 ``noise: {sigma_process: 0.1, sigma_measurement: 0.5, sigma_hessian: 1.0}`` used by formation files
-(SPEC §2.4: ``M = σ1² I_3``, ``R = σ2² I_N``, ``U = σ3² I_4``).
+(docs/theory/steady_state.md §2: ``M = σ1² I_3``, ``R = σ2² I_N``, ``U = σ3² I_4``).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ __all__ = ["CooperativeNoise", "NoiseConfig"]
 
 @dataclass(frozen=True)
 class CooperativeNoise:
-    """Covariances of the information model (SPEC §2.1, eqs. 7-9).
+    """Covariances of the information model (docs/theory/cooperative.md, eqs. cooperative.4–5).
 
     Parameters
     ----------
@@ -52,7 +52,7 @@ class CooperativeNoise:
 
     @classmethod
     def from_sigmas(cls, sigma_process: float, sigma_measurement: float, sigma_hessian: float) -> CooperativeNoise:
-        """``M = σ1² I_3``, ``R = σ2² I_N``, ``U = σ3² I_4`` (SPEC §2.4, Prop. 3.14)."""
+        """``M = σ1² I_3``, ``R = σ2² I_N``, ``U = σ3² I_4`` (docs/theory/steady_state.md §2)."""
         return cls(
             process=sigma_process**2 * np.eye(3),
             measurement=float(sigma_measurement) ** 2,
@@ -73,7 +73,7 @@ class CooperativeNoise:
         return R
 
     def total_measurement_covariance(self, D: np.ndarray) -> np.ndarray:
-        """``D U D' + R`` (SPEC §2.2, eq. 15), shape ``(..., N, N)`` for ``D`` of shape ``(..., N, 4)``."""
+        """``D U D' + R`` (docs/theory/cooperative.md §2), shape ``(..., N, N)`` for ``D`` of shape ``(..., N, 4)``."""
         return D @ self.hessian_error @ transpose(D) + self.measurement_matrix(D.shape[-2])
 
 

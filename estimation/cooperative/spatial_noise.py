@@ -1,10 +1,11 @@
-"""Spatially correlated Gaussian noise ``w(r)`` (SPEC §2.1-2.2): covariance kernels, W_k, V_k, samples.
+"""Spatially correlated Gaussian noise ``w(r)`` (docs/theory/cooperative.md §3): covariance kernels, W_k, V_k, samples.
 
 A stationary isotropic kernel ``E[w(r) w(r')] = σ_w² ρ(‖r − r'‖ / ℓ)`` from :data:`KERNELS`
 (``squared_exponential``, ``exponential`` = Matérn ½, ``matern32``) gives
 
 * ``W_k = E[w_k w_k']`` and ``V_k = E[w_k w_{k−1}']`` at platform positions (:meth:`SpatialNoise.W`,
-  :meth:`SpatialNoise.V`), and the Markov model of SPEC eqs. 10-12 (:meth:`SpatialNoise.markov`);
+  :meth:`SpatialNoise.V`), and the Markov model of docs/theory/cooperative.md, eq. cooperative.11
+  (:meth:`SpatialNoise.markov`);
 * exact joint samples at any finite set of points (:meth:`SpatialNoise.sample`, Cholesky);
 * sample *functions* evaluated on demand along trajectories decided as the mission goes
   (:meth:`SpatialNoise.realisation`, random Fourier features: ``w(r) = σ √(2/F) Σ cos(ω_f·r + φ_f)`` with
@@ -171,15 +172,15 @@ class SpatialNoise:
         return self.std**2 * KERNELS[self.kernel].correlation(d / self.length_scale)
 
     def W(self, positions: np.ndarray) -> np.ndarray:
-        """``W_k = E[w_k w_k']`` at platform positions ``(..., N, 2)`` → ``(..., N, N)`` (SPEC §2.1)."""
+        """``W_k = E[w_k w_k']`` at platform positions ``(..., N, 2)`` → ``(..., N, N)`` (eq. cooperative.10)."""
         return self.covariance(positions, positions)
 
     def V(self, positions: np.ndarray, previous_positions: np.ndarray) -> np.ndarray:
-        """``V_k = E[w_k w_{k−1}']`` for a static field sampled at successive positions (SPEC §2.2)."""
+        """``V_k = E[w_k w_{k−1}']`` for a static field sampled at successive positions (eq. cooperative.10)."""
         return self.covariance(positions, previous_positions)
 
     def markov(self, positions: np.ndarray, previous_positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """First-order model ``w_k = A^w w_{k−1} + η`` (SPEC §2.2, eqs. 10-12).
+        """First-order model ``w_k = A^w w_{k−1} + η`` (docs/theory/cooperative.md, eq. cooperative.11).
 
         Returns
         -------
@@ -190,8 +191,10 @@ class SpatialNoise:
         """
         W_prev = self.W(previous_positions)
         V = self.V(positions, previous_positions)
-        A_w = np.swapaxes(np.linalg.solve(W_prev, np.swapaxes(V, -1, -2)), -1, -2)  # SPEC §2.2, eq. 12
-        Q_w = self.W(positions) - A_w @ W_prev @ np.swapaxes(A_w, -1, -2)  # SPEC §2.2, eq. 12
+        # docs/theory/cooperative.md, eq. cooperative.11
+        A_w = np.swapaxes(np.linalg.solve(W_prev, np.swapaxes(V, -1, -2)), -1, -2)
+        # docs/theory/cooperative.md, eq. cooperative.11
+        Q_w = self.W(positions) - A_w @ W_prev @ np.swapaxes(A_w, -1, -2)
         return A_w, 0.5 * (Q_w + np.swapaxes(Q_w, -1, -2))
 
     def sample(self, positions: np.ndarray, rng: np.random.Generator, size: tuple[int, ...] = ()) -> np.ndarray:

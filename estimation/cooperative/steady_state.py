@@ -1,7 +1,8 @@
-"""Steady-state error covariance of the cooperative filter along a level curve (SPEC §2.4).
+"""Steady-state error covariance of the cooperative filter along a level curve (docs/theory/steady_state.md).
 
 With ``A → I`` (the centre moves along a level curve), constant noise and a fixed formation shape, the
-covariance converges to the solution of the discrete algebraic Riccati equation (SPEC eq. 29)
+covariance converges to the solution of the discrete algebraic Riccati equation (docs/theory/steady_state.md,
+eq. steady_state.1)
 
     P(+)⁻¹ = (P(+) + M)⁻¹ + C' (D U D' + R)⁻¹ C .
 
@@ -11,9 +12,9 @@ covariance converges to the solution of the discrete algebraic Riccati equation 
   (gradient, Hessian) for :mod:`mobisense.estimation.cooperative.formation_design`.
 
 Each returns or feeds a :class:`SteadyState` with prior and posterior covariances and the constant gain
-``K∞ = P∞(−) C' (C P∞(−) C' + D U D' + R)⁻¹ = P∞(+) C' (D U D' + R)⁻¹``. (The seed writes ``P∞`` in this
-formula for the posterior; with the posterior it is not the optimal gain, so the prior is used here —
-the second form shows the two are reconciled by replacing ``C P C' + DUD' + R`` with ``DUD' + R``.)
+``K∞ = P∞(−) C' (C P∞(−) C' + D U D' + R)⁻¹ = P∞(+) C' (D U D' + R)⁻¹``. (Zhang & Leonard (2010), §III-D,
+write ``P∞`` in this formula for the posterior; with the posterior it is not the optimal gain, so the prior is
+used here — the second form shows the two are reconciled by replacing ``C P C' + DUD' + R`` with ``DUD' + R``.)
 """
 
 from __future__ import annotations
@@ -58,7 +59,7 @@ class SteadyState:
 
     @property
     def trace(self) -> float:
-        """``tr P∞(+)``, the design objective of SPEC §2.4."""
+        """``tr P∞(+)``, the design objective of docs/theory/steady_state.md §3."""
         return float(np.trace(self.posterior))
 
 
@@ -68,7 +69,7 @@ def _gain(posterior: np.ndarray, C: np.ndarray, R_total: np.ndarray) -> np.ndarr
 
 
 def steady_state(positions: np.ndarray, noise: CooperativeNoise) -> SteadyState:
-    """Steady state for an arbitrary formation by the DARE (python-control ``dare``), SPEC §2.4.
+    """Steady state for an arbitrary formation by the DARE (python-control ``dare``), docs/theory/steady_state.md §1.
 
     Parameters
     ----------
@@ -91,8 +92,11 @@ def steady_state(positions: np.ndarray, noise: CooperativeNoise) -> SteadyState:
     C, D = taylor_matrices(positions)
     R_total = noise.total_measurement_covariance(D)
     if np.linalg.matrix_rank(C) < 3:
-        raise ValueError("positions: collinear formation, the steady state is unbounded (SPEC §2.3, Cd5)")
-    prior, _, _ = control.dare(np.eye(3), C.T, noise.process, R_total)  # SPEC §2.4, eq. 29 (dual form)
+        raise ValueError(
+            "positions: collinear formation, the steady state is unbounded (docs/theory/cooperative.md §4, Cd5)"
+        )
+    # docs/theory/steady_state.md, eq. steady_state.1 (dual form)
+    prior, _, _ = control.dare(np.eye(3), C.T, noise.process, R_total)
     prior = 0.5 * (prior + prior.T)
     S = C @ prior @ C.T + R_total
     posterior = prior - prior @ C.T @ np.linalg.solve(S, C @ prior)
@@ -101,9 +105,9 @@ def steady_state(positions: np.ndarray, noise: CooperativeNoise) -> SteadyState:
 
 
 def cross_information(a: Any, b: Any, sigma_measurement: Any, sigma_hessian: Any) -> tuple[Any, Any, Any]:
-    """``diag(c1, c2, c3) = C' (D U D' + R)⁻¹ C`` of the cross (SPEC §2.4, eq. 32); numpy or CasADi."""
+    """``diag(c1, c2, c3) = C' (D U D' + R)⁻¹ C`` of the cross (eq. steady_state.3); numpy or CasADi."""
     s2, s3 = sigma_measurement**2, sigma_hessian**2
-    c1 = 2 / (s2 + s3 * a**4 / 2) + 2 / (s2 + s3 * b**4 / 2)  # SPEC §2.4, eq. 31
+    c1 = 2 / (s2 + s3 * a**4 / 2) + 2 / (s2 + s3 * b**4 / 2)  # docs/theory/steady_state.md, eq. steady_state.3
     c2 = 2 * a**2 / s2
     c3 = 2 * b**2 / s2
     return c1, c2, c3
@@ -118,7 +122,7 @@ def _posterior_diagonal(c: Any, sigma_process: Any, sqrt: Any) -> Any:
 def cross_trace(
     a: np.ndarray, b: np.ndarray, sigma_process: float, sigma_measurement: float, sigma_hessian: float
 ) -> np.ndarray:
-    """``tr P∞(a, b)`` of the cross (SPEC §2.4, eq. 30), vectorised over arrays ``a, b`` (e.g. a grid)."""
+    """``tr P∞(a, b)`` of the cross (eq. steady_state.5), vectorised over arrays ``a, b`` (e.g. a grid)."""
     c = cross_information(np.asarray(a, float), np.asarray(b, float), sigma_measurement, sigma_hessian)
     return sum(_posterior_diagonal(ci, sigma_process, np.sqrt) for ci in c)
 
@@ -126,7 +130,7 @@ def cross_trace(
 def cross_steady_state(
     a: float, b: float, sigma_process: float, sigma_measurement: float, sigma_hessian: float
 ) -> SteadyState:
-    """Closed-form steady state of the cross formation (SPEC §2.4, Prop. 3.14).
+    """Closed-form steady state of the cross formation (docs/theory/steady_state.md §2).
 
     Parameters
     ----------
@@ -141,7 +145,8 @@ def cross_steady_state(
         ``posterior = diag(p1, p2, p3)``.
     """
     c = np.array(cross_information(a, b, sigma_measurement, sigma_hessian))
-    posterior = np.diag(_posterior_diagonal(c, sigma_process, np.sqrt))  # SPEC §2.4, eq. 30
+    # docs/theory/steady_state.md, eq. steady_state.4
+    posterior = np.diag(_posterior_diagonal(c, sigma_process, np.sqrt))
     positions = cross_formation(a, b)
     C, D = taylor_matrices(positions)
     noise = CooperativeNoise.from_sigmas(sigma_process, sigma_measurement, sigma_hessian)
@@ -151,7 +156,7 @@ def cross_steady_state(
 
 @functools.lru_cache(maxsize=1)
 def cross_trace_function() -> Any:
-    """CasADi function ``(x = [a, b], sigmas = [σ1, σ2, σ3]) → (tr P∞, ∇_x tr, ∇²_x tr)`` (SPEC §2.4, eq. 30).
+    """CasADi function ``(x = [a, b], sigmas = [σ1, σ2, σ3]) → (tr P∞, ∇_x tr, ∇²_x tr)`` (eq. steady_state.5).
 
     Built symbolically from the closed form; gradient and Hessian by CasADi's algorithmic
     differentiation.
@@ -161,6 +166,7 @@ def cross_trace_function() -> Any:
     x = ca.SX.sym("x", 2)
     sigmas = ca.SX.sym("sigmas", 3)
     c = cross_information(x[0], x[1], sigmas[1], sigmas[2])
-    trace = sum(_posterior_diagonal(ci, sigmas[0], ca.sqrt) for ci in c)  # SPEC §2.4, eq. 30
+    # docs/theory/steady_state.md, eq. steady_state.5
+    trace = sum(_posterior_diagonal(ci, sigmas[0], ca.sqrt) for ci in c)
     hessian, gradient = ca.hessian(trace, x)
     return ca.Function("cross_trace", [x, sigmas], [trace, gradient, hessian], ["x", "sigmas"], ["f", "g", "H"])

@@ -1,6 +1,8 @@
-"""Distributed constrained cooperative Kalman filter (SPEC §4, seed §3, §5, Algorithm 1).
+"""Distributed constrained cooperative Kalman filter (docs/theory/distributed.md §3–§6).
 
-Each :class:`CellFilter` estimates, at its own centre, the state (SPEC §4, seed eq. 13)
+The algorithm is that of Zhang et al. (2023), §§3, 5, Algorithm 1, with their equation numbers. Each
+:class:`CellFilter` estimates, at its own centre, the state (docs/theory/distributed.md, eq. distributed.4;
+Zhang et al. (2023), eq. 13)
 
     x(k) = [z(c^{k−1}, k−1), ∇z(c^{k−1}, k−1)', z(c^{k−1}, k), ∇z(c^{k−1}, k)']'     (6 entries, 2-D)
 
@@ -9,7 +11,8 @@ cells across its edges and projects onto the PDE constraint using what it receiv
 eq. 34). The only thing that crosses a cell boundary is a :class:`CentreEstimate` message, so the
 cells could run on separate vehicles; :class:`DistributedFilter` merely delivers the messages.
 
-Transition (derived from seed eqs. 9 and 12, whose printed matrices are garbled). Write
+Transition (docs/theory/distributed.md, eq. distributed.5, derived from Zhang et al. (2023), eqs. 9 and 12,
+whose printed matrices are garbled). Write
 ``S(Δr) = [[1, Δr'], [0, I]]`` for the Taylor transport of ``(z, ∇z)`` by ``Δr = c^k − c^{k−1}`` and
 ``h = [½ Δr'ĤΔr, (ĤΔr)']'`` for its second-order term. Eq. 12 moves both time levels to the new centre,
 ``y_{k−1} = S x_{1:3} + h``, ``y_k = S x_{4:6} + h``; eq. 9 (``z(c^k, k+1) = 2 z(c^k, k) − z(c^k, k−1)``,
@@ -18,21 +21,21 @@ in the same way, to the gradient. Hence
 
     x(k+1) = [y_k; 2 y_k − y_{k−1}] = A x(k) + U,    A = [[0, S], [−S, 2S]],    U = [h; h].
 
-The seed keeps only the ``ĤΔr`` part of ``U``; the ``½Δr'ĤΔr`` value terms make the transition exact
+The paper keeps only the ``ĤΔr`` part of ``U``; the ``½Δr'ĤΔr`` value terms make the transition exact
 for quadratic fields and cost nothing. Measurements of both time levels are expanded about ``c^{k−1}``
 (eqs. 14-16): rows ``[1, δ', 0, 0, 0]`` (time k−1) and ``[0, 0, 0, 1, δ']`` (time k) of ``C`` and
 ``½ kron(δ, δ)'`` of ``D``, with ``δ = r_i − c^{k−1}``. The Hessian is fitted to the residual
 ``P − C x̂`` by least squares (eq. 18; the minimum-norm solution, since the two middle columns of ``D``
 are equal and ``D'D`` is always singular) or ridge regression (eq. 19). The covariance is propagated
 by the Joseph form of :func:`mobisense.estimation.kalman.update`, which equals eq. 32 for the optimal gain. As in
-the seed, the projection does not change the covariance, and the unconstrained filter (reported for
+the paper, the projection does not change the covariance, and the unconstrained filter (reported for
 comparison) runs beside the constrained one with the same gain.
 
-Two choices the seed leaves open or gets wrong for this state:
+Two choices the paper leaves open or gets wrong for this state (docs/theory/departures.md):
 
 * Projection metric. Eq. 34 is the Euclidean projection; fed back through eq. 28 it is unstable here
   (the state mixes values and gradients, whose units differ: spectral radius 1.12 of the steady-state
-  error map of the seed's cells, see the tests). The default ``projection: covariance`` is Simon & Chia's
+  error map of the paper's cells, see the tests). The default ``projection: covariance`` is Simon & Chia's
   minimum-variance projection ``x̃ = x̂ − P G'(G P G')⁻¹(G x̂ − ĝ)``, unit-independent and stable;
   ``euclidean`` reproduces eq. 34.
 * Hessian. With all sensors at one distance from the centre (a square, a regular triangle) the centre
@@ -86,7 +89,10 @@ class ValueGradientStd(StrictModel):
 
 
 class HessianOptions(StrictModel):
-    """Hessian estimate of a cell (seed eqs. 18-19) and the covariance ``Q = error_std² I₄`` of its error."""
+    """Hessian estimate of a cell and the covariance ``Q = error_std² I₄`` of its error.
+
+    Theory: docs/theory/distributed.md §3.4; source: Zhang et al. (2023), eqs. 18-19.
+    """
 
     method: Literal["least_squares", "ridge"] = "ridge"
     ridge: PositiveFloat = Field(1.0, description="ε₀ of eq. 19 (L⁴); used by method 'ridge'")
@@ -94,14 +100,14 @@ class HessianOptions(StrictModel):
 
 
 class FilterOptions(StrictModel):
-    """Noise model of the per-cell filter (seed Assumption 5.1) and its initialisation."""
+    """Noise model of the per-cell filter (Zhang et al. (2023), Assumption 5.1) and its initialisation."""
 
     process_std: ValueGradientStd = Field(description="W = diag of squared stds, per step")
     initial_std: ValueGradientStd = Field(description="prior std around the first plane fit")
     hessian: HessianOptions = HessianOptions()
     projection: Literal["covariance", "euclidean"] = Field(
         "covariance",
-        description="metric of the constraint projection: P (minimum variance) or I (seed eq. 34)",
+        description="metric of the constraint projection: P (minimum variance) or I (Zhang et al. (2023), eq. 34)",
     )
 
 
@@ -158,10 +164,10 @@ def cell_transition(shift: np.ndarray, hessian: np.ndarray) -> tuple[np.ndarray,
     A : ndarray, shape (6, 6)
     U : ndarray, shape (..., 6)
     """
-    S = transition_matrix(shift)  # [[1, Δr'], [0, I]], SPEC §4, seed eq. 12
+    S = transition_matrix(shift)  # [[1, Δr'], [0, I]], docs/theory/distributed.md, eq. distributed.5
     A = np.zeros((6, 6))
     A[:3, 3:] = S  # y_k
-    A[3:, :3] = -S  # 2 y_k − y_{k−1}, SPEC §4, seed eq. 9
+    A[3:, :3] = -S  # 2 y_k − y_{k−1}, docs/theory/distributed.md, eq. distributed.5
     A[3:, 3:] = 2.0 * S
     Hdr = np.asarray(hessian, dtype=float) @ shift  # Ĥ Δr
     h = np.concatenate([0.5 * (Hdr @ shift)[..., None], Hdr], axis=-1)  # [½ Δr'ĤΔr, (ĤΔr)']
@@ -171,7 +177,9 @@ def cell_transition(shift: np.ndarray, hessian: np.ndarray) -> tuple[np.ndarray,
 def cell_measurement_matrices(
     offsets_previous: np.ndarray, offsets_current: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Taylor matrices of seed eq. 15: both time levels expanded about the previous centre.
+    """Taylor matrices of both time levels expanded about the previous centre (eq. distributed.6).
+
+    Source: Zhang et al. (2023), eq. 15.
 
     Parameters
     ----------
@@ -187,7 +195,7 @@ def cell_measurement_matrices(
     """
     n = offsets_previous.shape[0]
     C = np.zeros((2 * n, 6))
-    C[:n, 0], C[:n, 1:3] = 1.0, offsets_previous  # SPEC §4, seed eq. 15
+    C[:n, 0], C[:n, 1:3] = 1.0, offsets_previous  # docs/theory/distributed.md, eq. distributed.6
     C[n:, 3], C[n:, 4:6] = 1.0, offsets_current
     offsets = np.concatenate([offsets_previous, offsets_current])
     D = 0.5 * (offsets[:, :, None] * offsets[:, None, :]).reshape(2 * n, 4)  # ½ kron(δ, δ)', eq. 15
@@ -195,7 +203,9 @@ def cell_measurement_matrices(
 
 
 def fit_hessian(D: np.ndarray, residual: np.ndarray, options: HessianOptions) -> np.ndarray:
-    """``vec Ĥ`` fitted to ``residual = P − C x̂`` (seed eq. 18, minimum-norm least squares, or eq. 19, ridge).
+    """``vec Ĥ`` fitted to ``residual = P − C x̂`` by minimum-norm least squares or ridge (eq. distributed.7).
+
+    Source: Zhang et al. (2023), eq. 18 (least squares) and eq. 19 (ridge).
 
     Parameters
     ----------
@@ -217,7 +227,7 @@ def fit_hessian(D: np.ndarray, residual: np.ndarray, options: HessianOptions) ->
 
 
 class CellFilter:
-    """The constrained and unconstrained cooperative filters of one cell (seed Algorithm 1).
+    """The constrained and unconstrained cooperative filters of one cell (Zhang et al. (2023), Algorithm 1).
 
     Parameters
     ----------

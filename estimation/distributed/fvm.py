@@ -1,7 +1,7 @@
-"""Finite-volume Laplacian of a sensor cell and the PDE constraint ``G x = g`` (SPEC §4, seed eqs. 20-27, 34).
+"""Finite-volume Laplacian of a sensor cell and the PDE constraint ``G x = g`` (docs/theory/distributed.md §5–§6).
 
-Derivation (our notation; the seed's printed symbols are garbled). For a cell C with vertices
-``r_0..r_{n−1}`` counter-clockwise and centre ``c``, the divergence theorem gives
+Derivation (our notation; the printed symbols of Zhang et al. (2023), eqs. 20-27 and 34, are garbled). For a
+cell C with vertices ``r_0..r_{n−1}`` counter-clockwise and centre ``c``, the divergence theorem gives
 ``∫_C Δz = Σ_s ∫_s ∇z·ν_s``. On edge ``s`` (from ``r_s`` to ``r_{s+1}``, length ``ℓ_s``, unit tangent
 ``τ_s``, outward normal ``ν_s = (τ_y, −τ_x)``) let ``f_s`` be the far point: the neighbour's centre across
 the edge, or the edge midpoint on the boundary, and ``t_s = (f_s − c)/d_s``, ``d_s = |f_s − c|``. Split
@@ -16,20 +16,21 @@ so that, with ``∫_s ∇z·τ_s = z(r_{s+1}) − z(r_s)`` (exact) and ``∫_s �
 
 It is exact for linear fields on any cell and, on interior cells, for quadratic fields when every far
 point is the mirror image of ``c`` in the edge midpoint (regular meshes: uniform rectangles, uniform
-triangles); on smoothly distorted meshes the interior error falls as h². The boundary rule is not
+triangles); on smoothly distorted meshes the interior error falls at about h² (measured orders 1.70 and 1.87
+on a smoothly warped grid; the test requires > 1.6). The boundary rule is not
 consistent: its difference quotient is centred between ``c`` and the midpoint, and the vertex mean misses
 ``z`` at the midpoint by ⅛ℓ²τ'Hτ, so a boundary cell's Laplacian errs by O(‖H‖) at any size (an
 isolated equilateral triangle returns twice Δz of a quadratic; isolated squares happen to be exact) — see the
 tests. The constraint multiplies it by θΔt, which keeps the bias small for smooth fields.
 
 Substituting into the explicit discretisation of ``∂z/∂t = θΔz + v·∇z`` about the previous centre
-(eq. 20), with the state ``x = [z(c, k−1), ∇z(c, k−1)', z(c, k), ∇z(c, k)']'`` (SPEC §4, seed eq. 13):
+(eq. 20), with the state ``x = [z(c, k−1), ∇z(c, k−1)', z(c, k), ∇z(c, k)']'`` (eq. distributed.4):
 
     z(c, k) − z(c, k−1) = Δt v·∇z(c, k−1) + θΔt Δz(c, k−1)
     ⇒  G = [θΔt S/A − 1, −Δt v', 1, 0, 0],  S = Σ_s b_s,
        g = (θΔt/A) Σ_s [α_s (z_{s+1} − z_s) + b_s z(f_s)]                                    (eqs. 26-27)
 
-(the seed prints the first entry as ``1 + θΔtS/A``; the sign above follows from eq. 24). The filter
+(the paper prints the first entry as ``1 + θΔtS/A``; the sign above follows from eq. 24). The filter
 uses ``ĝ`` (eq. 35): vertex values are the sensors' measurements and ``z(f_s)`` the neighbours' shared
 centre estimates.
 """
@@ -144,8 +145,8 @@ def laplacian_stencil(vertices: np.ndarray, centre: np.ndarray, far: np.ndarray)
     if np.any(cos_theta <= 0):
         bad = int(np.argmin(cos_theta))
         raise MeshError(f"centre line of edge {bad} does not cross it outward (cos θ = {cos_theta[bad]:.3g})")
-    beta = 1.0 / cos_theta  # SPEC §4, seed eq. 21
-    alpha = -np.einsum("sd,sd->s", t, tau) * beta  # SPEC §4, seed eq. 21
+    beta = 1.0 / cos_theta  # docs/theory/distributed.md, eq. distributed.10
+    alpha = -np.einsum("sd,sd->s", t, tau) * beta  # docs/theory/distributed.md, eq. distributed.10
     return LaplacianStencil(area=area, tangent_weights=alpha, centre_weights=beta * length / d)
 
 
@@ -184,8 +185,8 @@ def pde_constraint(
     scale = diffusivity * time_step / stencil.area  # θΔt/A
     along = following(vertex_values) - vertex_values
     G = np.zeros(6)
-    G[0] = scale * stencil.centre_weights.sum() - 1.0  # SPEC §4, seed eq. 26 (sign derived, see module doc)
-    G[1:3] = -time_step * np.asarray(velocity, dtype=float)  # SPEC §4, seed eq. 26
+    G[0] = scale * stencil.centre_weights.sum() - 1.0  # docs/theory/distributed.md, eq. distributed.12 (sign derived)
+    G[1:3] = -time_step * np.asarray(velocity, dtype=float)  # docs/theory/distributed.md, eq. distributed.12
     G[3] = 1.0
     g = scale * float(
         stencil.tangent_weights @ along + stencil.centre_weights @ np.asarray(far_values)
@@ -196,10 +197,11 @@ def pde_constraint(
 def project(
     x: np.ndarray, G: np.ndarray, g: np.ndarray | float, metric: np.ndarray | None = None
 ) -> np.ndarray:
-    """Projection onto ``{x : G x = g}``: ``x̃ = x − M G'(G M G')⁻¹(G x − g)`` (SPEC §4, seed eq. 34).
+    """Projection onto ``{x : G x = g}``: ``x̃ = x − M G'(G M G')⁻¹(G x − g)`` (eq. distributed.13).
 
-    ``M = I`` (the default) is the seed's Euclidean projection; ``M = P``, the error covariance, is the
-    minimum-variance projection of Simon & Chia (2002), which does not depend on the units of the state.
+    ``M = I`` (the default) is the Euclidean projection of Zhang et al. (2023), eq. 34; ``M = P``, the error
+    covariance, is the minimum-variance projection of Simon & Chia (2002), which does not depend on the units
+    of the state.
 
     Parameters
     ----------
@@ -221,7 +223,8 @@ def project(
         G, g = G[None, :], g[..., None]
     MG = G.T if metric is None else metric @ G.T  # M G', shape (n, m)
     residual = x @ G.T - g  # G x − g, shape (..., m)
-    return x - np.linalg.solve(G @ MG, residual[..., None])[..., 0] @ MG.T  # SPEC §4, seed eq. 34
+    # docs/theory/distributed.md, eq. distributed.13
+    return x - np.linalg.solve(G @ MG, residual[..., None])[..., 0] @ MG.T
 
 
 def mesh_laplacian(

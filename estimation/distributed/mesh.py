@@ -1,4 +1,4 @@
-"""Sensor networks organised in cells (SPEC §4): polygons of sensors, shared edges, neighbours, boundary.
+"""Sensor networks in cells (docs/theory/distributed.md §2): polygons of sensors, shared edges, neighbours, boundary.
 
 A :class:`SensorMesh` is the fixed communication graph of Assumption 2.1: cell ``j`` is a polygon whose
 vertices are the sensors listed in ``cells[j]``; two cells are neighbours when they share an edge
@@ -30,7 +30,7 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["CellEdge", "MeshError", "SensorMesh", "following", "polygon_area", "grid_network", "seed_network"]
+__all__ = ["CellEdge", "MeshError", "SensorMesh", "following", "polygon_area", "grid_network", "paper_network"]
 
 
 class MeshError(ValueError):
@@ -170,7 +170,7 @@ class SensorMesh:
         return [(e.start, e.end) for cell_edges in self._edges for e in cell_edges if e.neighbour is None]
 
     def centres(self, positions: np.ndarray) -> np.ndarray:
-        """Cell centres ``r_c = mean of the cell's sensors`` (seed §2.1), shape ``(..., n_cells, 2)``.
+        """Cell centres ``r_c = mean of the cell's sensors`` (Zhang et al. (2023), §2.1), shape ``(..., n_cells, 2)``.
 
         Parameters
         ----------
@@ -228,10 +228,10 @@ def grid_network(
     return positions, cells
 
 
-def seed_network(
+def paper_network(
     square: float = 30.0, depth: float = 24.0, origin: tuple[float, float] = (0.0, 0.0)
 ) -> tuple[np.ndarray, list[list[int]]]:
-    """The seed's 12-sensor, 9-cell network (§8, Fig. 4A): a square, 4 rectangles, 4 corner triangles.
+    """The 12-sensor, 9-cell network of Zhang et al. (2023), §8, Fig. 4A: a square, 4 rectangles, 4 corner triangles.
 
     Parameters
     ----------

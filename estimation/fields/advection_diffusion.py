@@ -1,4 +1,7 @@
-"""Advection–diffusion fields (SPEC §4): an exact solution of ``∂z/∂t = θ Δz + v·∇z`` and the seed's field.
+"""Advection–diffusion fields (docs/theory/distributed.md §1): an exact solution and the paper's field.
+
+The PDE is ``∂z/∂t = θ Δz + v·∇z`` (eq. distributed.1); the paper's field is the test field of
+Zhang et al. (2023), §8.
 
 Both are products of two travelling, decaying sine waves,
 
@@ -9,12 +12,12 @@ and differ only in the three rates ``(ω_x, ω_y, λ)``:
 ``variant="exact"`` (default)
     ``ω = k v``, ``λ = 2 θ π² k²``. With ``a = πk(x + v_x t)``, ``b = πk(y + v_y t)``:
     ``∂z/∂t = πk v_x cos a sin b e + πk v_y sin a cos b e − 2θπ²k² z = v·∇z + θ Δz`` because
-    ``∇z = πk (cos a sin b, sin a cos b) e`` and ``Δz = −2π²k² z``. The sign matters: with the SPEC's
-    ``+ v·∇z`` the pattern is ``f(r + v t)``, i.e. it drifts along **−v** (the usual advection equation
-    ``∂z/∂t + u·∇z = θΔz`` has ``u = −v``).
-``variant="seed"``
-    The seed's §8 field ``sin(π(k₁x + v₁k₂t)) sin(π(k₁y + v₂k₂t)) e^{−2θπ²k₂t}`` (``k₁ = wavenumber``,
-    ``k₂ = temporal_wavenumber``): ``ω = k₂ v``, ``λ = 2θπ²k₂``. It does **not** satisfy the PDE
+    ``∇z = πk (cos a sin b, sin a cos b) e`` and ``Δz = −2π²k² z``. The sign matters: with ``+ v·∇z`` in
+    docs/theory/distributed.md, eq. distributed.1, the pattern is ``f(r + v t)``, i.e. it drifts along **−v**
+    (the usual advection equation ``∂z/∂t + u·∇z = θΔz`` has ``u = −v``).
+``variant="paper"``
+    The test field of Zhang et al. (2023), §8, ``sin(π(k₁x + v₁k₂t)) sin(π(k₁y + v₂k₂t)) e^{−2θπ²k₂t}``
+    (``k₁ = wavenumber``, ``k₂ = temporal_wavenumber``): ``ω = k₂ v``, ``λ = 2θπ²k₂``. It does **not** satisfy the PDE
     (residual ``(k₂/k₁ − 1) v·∇z + 2θπ²(k₁² − k₂) z``), which :meth:`AdvectionDiffusionField.pde_residual`
     reports; it is offered to reproduce the paper's numbers.
 
@@ -47,10 +50,10 @@ class AdvectionDiffusionField(Field):
         Spatial wavenumber k > 0 (1/L); the pattern repeats every ``2/k``.
     amplitude : float
         A (field unit).
-    variant : {"exact", "seed"}
-        ``"exact"`` solves the PDE; ``"seed"`` is the paper's field (see the module docstring).
+    variant : {"exact", "paper"}
+        ``"exact"`` solves the PDE; ``"paper"`` is the paper's field (see the module docstring).
     temporal_wavenumber : float
-        k₂ of the seed's field (1/L); used only by ``variant="seed"``.
+        k₂ of the paper's field (1/L); used only by ``variant="paper"``.
 
     Notes
     -----
@@ -76,7 +79,7 @@ class AdvectionDiffusionField(Field):
         velocity: Sequence[float] = (0.5, 1.0),
         wavenumber: float = 0.005,
         amplitude: float = 1.0,
-        variant: Literal["exact", "seed"] = "exact",
+        variant: Literal["exact", "paper"] = "exact",
         temporal_wavenumber: float = 1e-4,
     ) -> None:
         if not diffusivity > 0 or not wavenumber > 0 or not temporal_wavenumber > 0:
@@ -87,8 +90,8 @@ class AdvectionDiffusionField(Field):
         velocity = np.asarray(velocity, dtype=float)
         if velocity.shape != (2,):
             raise ValueError(f"velocity: expected 2 components, got shape {velocity.shape}")
-        if variant not in ("exact", "seed"):
-            raise ValueError(f"variant: expected 'exact' or 'seed', got {variant!r}")
+        if variant not in ("exact", "paper"):
+            raise ValueError(f"variant: expected 'exact' or 'paper', got {variant!r}")
         self.diffusivity = float(diffusivity)
         self.velocity = velocity
         self.wavenumber = float(wavenumber)
@@ -101,8 +104,8 @@ class AdvectionDiffusionField(Field):
             self._decay = 2.0 * theta * np.pi**2 * k**2  # λ = 2θπ²k²
         else:
             k2 = self.temporal_wavenumber
-            self._omega = k2 * velocity  # seed §8: ω = k₂ v
-            self._decay = 2.0 * theta * np.pi**2 * k2  # seed §8: λ = 2θπ²k₂
+            self._omega = k2 * velocity  # Zhang et al. (2023), §8: ω = k₂ v
+            self._decay = 2.0 * theta * np.pi**2 * k2  # Zhang et al. (2023), §8: λ = 2θπ²k₂
 
     def __repr__(self) -> str:
         return (
@@ -151,6 +154,6 @@ class AdvectionDiffusionField(Field):
         return np.pi * (self._omega[0] * ca * sb + self._omega[1] * sa * cb) * e - self._decay * sa * sb * e
 
     def pde_residual(self, r: np.ndarray, t: float = 0.0) -> np.ndarray:
-        """``∂z/∂t − θ Δz − v·∇z`` (SPEC §4), shape ``r.shape[:-1]``: round-off for ``variant="exact"``."""
+        """``∂z/∂t − θ Δz − v·∇z`` (eq. distributed.3), shape ``r.shape[:-1]``: round-off for ``variant="exact"``."""
         advection = self.gradient(r, t) @ self.velocity
         return self.time_derivative(r, t) - self.diffusivity * self.laplacian(r, t) - advection

@@ -1,14 +1,15 @@
-"""Concrete smooth fields (SPEC §2.8) and their YAML form.
+"""Concrete smooth fields (docs/theory/cooperative.md §6) and their YAML form.
 
 Each is registered in :data:`mobisense.estimation.fields.base.FIELDS`:
 
 * ``quadratic`` — ``z = z0 + g'(r − r0) + ½ (r − r0)' H (r − r0)``, the analytic test case;
-* ``two_charges`` — potential of two identical positive point charges (seed §VII, Fig. 3);
+* ``two_charges`` — potential of two identical positive point charges (Zhang & Leonard (2010), §VII, Fig. 3);
 * ``ocean_temperature`` — synthetic ocean-like temperature (°C over km): a meandering front, warm and
-  cold eddies and a gentle meridional gradient, with the 13 °C isotherm crossing the domain (seed §VII,
-  Figs. 4-6, whose Monterey Bay snapshot is not public);
+  cold eddies and a gentle meridional gradient, with the 13 °C isotherm crossing the domain
+  (Zhang & Leonard (2010), §VII, Figs. 4-6, whose Monterey Bay snapshot is not public);
 * ``gridded`` — a field read from a netCDF file (:mod:`mobisense.estimation.fields.gridded`);
-* ``advection_diffusion`` — SPEC §4, registered by :mod:`mobisense.estimation.fields.advection_diffusion` when present.
+* ``advection_diffusion`` — docs/theory/distributed.md §1, registered by
+  :mod:`mobisense.estimation.fields.advection_diffusion` when present.
 
 Derivatives are written by hand and tested against finite differences (``tests/test_estimation_fields.py``).
 In YAML a field is a flat mapping ``{kind: ocean_temperature, front_width: 5.0}`` validated by
@@ -89,7 +90,7 @@ class QuadraticField(Field):
 
 @register_field
 class TwoChargesField(Field):
-    """Potential of identical point charges: ``z = q Σ_j (‖r − c_j‖² + ε²)^(−1/2)`` (seed §VII).
+    """Potential of identical point charges: ``z = q Σ_j (‖r − c_j‖² + ε²)^(−1/2)`` (Zhang & Leonard (2010), §VII).
 
     Parameters
     ----------

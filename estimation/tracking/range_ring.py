@@ -1,4 +1,6 @@
-"""A ring of directional range sensors and pairwise triangulation (SPEC §3, seed 001 §7.3–7.4, eqs. 41–48).
+"""A ring of directional range sensors and pairwise triangulation (docs/theory/leader_follower.md §6).
+
+The model and its equation numbers follow Karasalo & Hu (2010), §7.3–7.4, eqs. 41–48.
 
 Sensors sit on a circle of radius ``mount_radius`` around the robot centre at body-frame angles
 ``mount_angles`` and look along body-frame ``headings`` (Khepera II-like by default: eight IR sensors, six
@@ -10,14 +12,15 @@ Neighbouring sensors form *pairs*; a pair triangulates the target position by th
 43–46) and passes the activity test (eq. 48) when a triangle with sides ``Δs, δ_q, δ_{q−1}`` exists.
 
 Mirror ambiguity (eq. 45): the two circles ``‖p − s_q‖ = δ_q``, ``‖p − s_{q−1}‖ = δ_{q−1}`` meet in two points
-mirrored across the baseline. The seed's ``+Δy'`` picks the side of the baseline to the left of
+mirrored across the baseline. The paper's ``+Δy'`` picks the side of the baseline to the left of
 ``s_q − s_{q−1}``, which is the outer side for its clockwise sensor numbering; we pick the outer side (away
 from the robot centre) for any numbering, since a sensor only sees outward.
 
-Pair measurement covariance (our choice, the seed does not specify one): linearising the two range
-equations about the triangulated point, ``u_q·dp = dδ_q`` and ``u_{q−1}·dp = dδ_{q−1}`` with ``u`` the unit
-vectors from the sensors to the target, so ``dp = U⁻¹ dδ`` and ``R = σ² U⁻¹ U⁻ᵀ`` with ``U = [u_q; u_{q−1}]``.
-It grows without bound as the target approaches the baseline's line, where triangulation is ill-posed.
+Pair measurement covariance (our choice, the paper does not specify one; docs/theory/leader_follower.md,
+eq. leader_follower.19): linearising the two range equations about the triangulated point, ``u_q·dp = dδ_q`` and
+``u_{q−1}·dp = dδ_{q−1}`` with ``u`` the unit vectors from the sensors to the target, so ``dp = U⁻¹ dδ`` and
+``R = σ² U⁻¹ U⁻ᵀ`` with ``U = [u_q; u_{q−1}]``. It grows without bound as the target approaches the baseline's line,
+where triangulation is ill-posed.
 """
 
 from __future__ import annotations
@@ -36,10 +39,10 @@ __all__ = [
     "triangulation_covariance",
 ]
 
-#: Khepera II IR sensor placements (deg, counter-clockwise from forward), numbered s1…s8 as in the seed's
-#: Fig. 2: s1 left, clockwise over the front to s6 right, then s7 rear right and s8 rear left.
+#: Khepera II IR sensor placements (deg, counter-clockwise from forward), numbered s1…s8 as in
+#: Karasalo & Hu (2010), Fig. 2: s1 left, clockwise over the front to s6 right, then s7 rear right and s8 rear left.
 KHEPERA_MOUNT_ANGLES_DEG = (90.0, 45.0, 10.0, -10.0, -45.0, -90.0, -170.0, 170.0)
-#: the seed's six neighbouring pairs p1…p6 (eq. 41), 1-based sensor numbers
+#: the paper's six neighbouring pairs p1…p6 (eq. 41), 1-based sensor numbers
 KHEPERA_PAIRS = ((1, 2), (2, 3), (3, 4), (4, 5), (5, 6), (7, 8))
 
 
@@ -58,7 +61,8 @@ def cosine_ratio(baseline: np.ndarray, delta_q: np.ndarray, delta_q_prev: np.nda
     ndarray, shape (...)
         ``(Δs² + δ_q² − δ_{q−1}²) / (2 Δs δ_q)``; a real triangle needs ``|·| < 1``.
     """
-    # SPEC §3 (seed eq. 43/48): cos ψ = (Δs² + δ_q² − δ_{q−1}²) / (2 Δs δ_q)
+    # docs/theory/leader_follower.md, eq. leader_follower.17 (Karasalo & Hu (2010), eqs. 43, 48):
+    # cos ψ = (Δs² + δ_q² − δ_{q−1}²) / (2 Δs δ_q)
     with np.errstate(divide="ignore", invalid="ignore"):
         return (baseline**2 + delta_q**2 - delta_q_prev**2) / (2.0 * baseline * delta_q)
 
@@ -91,7 +95,8 @@ def triangulate(
     cos_psi = cosine_ratio(baseline, delta_q, delta_q_prev)
     with np.errstate(invalid="ignore"):
         sin_psi = np.sqrt(1.0 - cos_psi**2)  # eq. 47 (NaN when eq. 48 fails)
-    # SPEC §3 (seed eqs. 44–46): p = s_q − δ_q cos ψ e + δ_q sin ψ n, in world coordinates
+    # docs/theory/leader_follower.md, eq. leader_follower.18 (Karasalo & Hu (2010), eqs. 44–46):
+    # p = s_q − δ_q cos ψ e + δ_q sin ψ n, in world coordinates
     return s_q + delta_q[..., None] * (-cos_psi[..., None] * e + sin_psi[..., None] * n)
 
 
@@ -224,7 +229,7 @@ class RangeSensorRing:
         PairMeasurements
         """
         sensors = self.sensor_positions(pose)
-        delta = readings + self.target_radius  # SPEC §3 (seed eq. 42): δ = δ̃ + r
+        delta = readings + self.target_radius  # docs/theory/leader_follower.md, eq. leader_follower.16: δ = δ̃ + r
         q_prev, q = self.pairs[:, 0], self.pairs[:, 1]
         baseline = np.hypot(*(sensors[q] - sensors[q_prev]).T)
         ratio = cosine_ratio(baseline, delta[q], delta[q_prev])

@@ -1,23 +1,26 @@
-"""Switching Kalman filter for target tracking with sensor pairs (SPEC §3, seed 001 §7, Algorithm 7.1).
+"""Switching Kalman filter for target tracking with sensor pairs (docs/theory/leader_follower.md §7).
+
+The algorithm and its equation numbers follow Karasalo & Hu (2010), §7, Algorithm 7.1.
 
 One Kalman sub-filter ``F_j`` per sensor pair runs on the random-walk (constant-velocity) target model of
 eq. 40 with state ``x = (x, y, ẋ, ẏ)`` (m, m, m/s, m/s) and measurement the triangulated position. At every
 step the *active* sub-filters (Definition 1) predict and update with their pair's position; their
 estimates are merged by a strategy registered in :data:`MERGES`:
 
-* ``closest`` — the seed's §8.1 choice: the active sub-filter whose position is closest to the merged
+* ``closest`` — the paper's §8.1 choice: the active sub-filter whose position is closest to the merged
   prediction (the previous estimate propagated one step);
 * ``information`` — information-weighted mean ``x = P Σ w_j P_j⁻¹ x_j`` with ``P⁻¹ = Σ w_j P_j⁻¹`` and uniform
   weights ``w_j = 1/m`` (covariance intersection). The sub-filters share the process noise and, for
   neighbouring pairs, a sensor, so they are correlated; the plain information sum (``w_j = 1``) would be
   overconfident, covariance intersection is consistent whatever the correlation.
 
-With no active pair, the merged estimate coasts on the model. Choices the seed leaves open (ours):
+With no active pair, the merged estimate coasts on the model. Choices the paper leaves open (ours;
+docs/theory/departures.md):
 
 * an inactive sub-filter is idle; when it becomes active again it is restarted from the merged prediction,
   so a stale extrapolation never enters the merge (only sub-filters active now are merged);
-* the discrete process-noise covariance is ``G q G'`` with the ``G`` of eq. 40 (the seed's eq. 36 prints
-  ``BᵀQB``, an OCR slip for ``B Q Bᵀ``);
+* the discrete process-noise covariance is ``G q G'`` with the ``G`` of eq. 40 (the paper's eq. 36 prints
+  ``BᵀQB``, a misprint for ``B Q Bᵀ``);
 * predict/update are the shared kernels of :mod:`mobisense.estimation.kalman` (Joseph-form update), batched over
   the active sub-filters.
 """
@@ -48,7 +51,9 @@ C_POSITION = np.hstack([np.eye(2), np.zeros((2, 2))])
 
 
 def random_walk_model(sample_time: float, acceleration_std: float) -> tuple[np.ndarray, np.ndarray]:
-    """Discrete random-walk target model (seed eq. 40).
+    """Discrete random-walk target model (docs/theory/leader_follower.md, eq. leader_follower.20).
+
+    Source: Karasalo & Hu (2010), eq. 40.
 
     Parameters
     ----------
@@ -65,7 +70,7 @@ def random_walk_model(sample_time: float, acceleration_std: float) -> tuple[np.n
         Process-noise covariance ``G q G'``.
     """
     h = sample_time
-    # SPEC §3 (seed eq. 40): x_{t+1} = A x_t + G w_t
+    # docs/theory/leader_follower.md, eq. leader_follower.20: x_{t+1} = A x_t + G w_t
     A = np.eye(4)
     A[0, 2] = A[1, 3] = h
     G = np.vstack([0.5 * h**2 * np.eye(2), h * np.eye(2)])
@@ -142,7 +147,7 @@ class SwitchingStep:
 
 
 class SwitchingKalmanFilter:
-    """Bank of per-pair Kalman sub-filters with switching/merging (seed Algorithm 7.1, steps 4–6).
+    """Bank of per-pair Kalman sub-filters with switching/merging (Karasalo & Hu (2010), Algorithm 7.1, steps 4–6).
 
     Parameters
     ----------
@@ -214,11 +219,11 @@ class SwitchingKalmanFilter:
             starting[:] = False
         elif starting.any():  # (re)start from the merged prediction
             self.states[starting], self.covariances[starting] = prior, prior_P
-        if running.any():  # SPEC §3 (seed eq. 36, time update), batched over sub-filters
+        if running.any():  # Karasalo & Hu (2010), eq. 36 (time update), batched over sub-filters
             x, P = predict(self.states[running][..., None], self.covariances[running], self.A, self.Q)
             self.states[running], self.covariances[running] = x[..., 0], P
         updated = running | starting
-        if updated.any():  # SPEC §3 (seed eq. 36, measurement update), batched
+        if updated.any():  # Karasalo & Hu (2010), eq. 36 (measurement update), batched
             x, P, _, _ = update(
                 self.states[updated][..., None],
                 self.covariances[updated],

@@ -1,20 +1,22 @@
-"""Gradient-based adaptive formation of a sensor mesh (SPEC §4, seed eqs. 38-44), vectorised over sensors.
+"""Gradient-based adaptive formation of a sensor mesh (docs/theory/distributed.md §7), vectorised over sensors.
+
+The equation numbers below are those of Zhang et al. (2023), eqs. 38-44.
 
 Every sensor ``i`` combines the gradient estimates of the cells it belongs to, weighted by inverse
 squared distance to their centres (eq. 38), ``v_i = Σ_{j∋i} ∇̂z(c_j)/‖r_i − c_j‖²``, by default divided by
 ``Σ_{j∋i} 1/‖r_i − c_j‖²`` (``weighting: mean``): the printed sum has units field/L³ and grows as the
 formation shrinks and with the number of cells a sensor belongs to, so the inner and outer sensors of the
-seed's mesh would get desired distances up to ~3 times apart in a uniform gradient. Its heading is
+paper's mesh would get desired distances up to ~3 times apart in a uniform gradient. Its heading is
 ``w_i = v_i/‖v_i‖`` (eq. 41) and ``w_i^⊥`` is ``w_i`` turned by +90°. Each link ``(i, i')`` — every pair of
 sensors sharing a cell, the sensors a sensor talks to (eq. 3) — gets the desired spacing (eq. 39)
 
     ρ_ii' = ε₁ / (½‖v_i + v_i'‖² + ε₂) + ε₃  ∈ (ε₃, ε₁/ε₂ + ε₃),
 
 small where the field is steep and large where it is flat, and the desired distance ``d_ii' = ℓ_ii' ρ_ii'``
-with ``ℓ ≡ 1`` (the seed) or, with ``keep_shape``, ``ℓ`` the initial link lengths divided by their mean:
-equal distances cannot be met by a rectangle's sides and diagonals, nor by the 20 edges of the seed's mesh
+with ``ℓ ≡ 1`` (the paper) or, with ``keep_shape``, ``ℓ`` the initial link lengths divided by their mean:
+equal distances cannot be met by a rectangle's sides and diagonals, nor by the 20 edges of the paper's mesh
 of 4 triangles and 5 rectangles (the angles at its four inner vertices would sum to 1320°, not 1440°).
-Including the diagonals makes the seed's mesh rigid (30 links, rank 21 = 2·12 − 3).
+Including the diagonals makes the paper's mesh rigid (30 links, rank 21 = 2·12 − 3).
 
 Velocity (eqs. 42, 40): ``u_i = a w_i + b w_i^⊥ + c f_i`` (source seeking) or, for contour following
 (SUSD, eq. 44), ``u_i = a (z_d − p_i) w_i + b w_i^⊥ + c f_i``; ``r_i ← r_i + Δt u_i``. The spacing term is
@@ -23,7 +25,7 @@ Velocity (eqs. 42, 40): ``u_i = a w_i + b w_i^⊥ + c f_i`` (source seeking) or,
     V = ½ Σ_links (‖r_i − r_i'‖ − d_ii')²,
 
 which pulls neighbours together when they are farther apart than ``d`` and pushes them apart when closer:
-the stable direction (the seed's sentence states the reverse, which would make V grow). With eq. 44 as
+the stable direction (the paper's sentence states the reverse, which would make V grow). With eq. 44 as
 printed, ``(p_i − z_d)``, a sensor above the level would climb further; ``(z_d − p_i)`` with ``a > 0`` is
 the convergent sign (equivalently eq. 44 with ``a < 0``). Units: positions L, time s, ``a, b`` in L/s
 (SUSD: ``a`` in L/s per field unit), ``c`` in 1/s, ``ε₁`` in L·(field unit/L)², ``ε₂`` in
@@ -52,13 +54,13 @@ __all__ = [
 
 
 class FormationOptions(StrictModel):
-    """Gains of the gradient-based formation law (seed eqs. 39, 42, 44)."""
+    """Gains of the gradient-based formation law (Zhang et al. (2023), eqs. 39, 42, 44)."""
 
     law: Literal["source_seeking", "susd"] = "source_seeking"
     a: FiniteFloat = Field(1.0, description="gain along w (L/s; SUSD: L/s per field unit)")
     b: FiniteFloat = Field(0.0, description="gain along w⊥ (L/s)")
     c: NonNegativeFloat = Field(
-        0.1, description="spacing gain (1/s); stable if c Δt < 2/λmax(link stiffness): 0.32 (seed mesh)"
+        0.1, description="spacing gain (1/s); stable if c Δt < 2/λmax(link stiffness): 0.32 (paper's mesh)"
     )
     epsilon1: PositiveFloat
     epsilon2: PositiveFloat
@@ -66,7 +68,7 @@ class FormationOptions(StrictModel):
     desired_level: FiniteFloat | None = Field(None, description="z_d of the SUSD law (field unit)")
     keep_shape: bool = Field(True, description="scale the initial edge lengths instead of equal distances")
     weighting: Literal["mean", "sum"] = Field(
-        "mean", description="eq. 38 as a weighted mean or the seed's sum"
+        "mean", description="eq. 38 as a weighted mean or the paper's sum"
     )
 
     @model_validator(mode="after")
@@ -88,7 +90,9 @@ def weighted_gradients(
     membership: np.ndarray,
     normalise: bool = True,
 ) -> np.ndarray:
-    """``v_i = Σ_{j∋i} ∇̂z(c_j)/‖r_i − c_j‖²`` (seed eq. 38), by default divided by ``Σ_{j∋i} 1/‖r_i − c_j‖²``.
+    """``v_i = Σ_{j∋i} ∇̂z(c_j)/‖r_i − c_j‖²``, by default divided by ``Σ_{j∋i} 1/‖r_i − c_j‖²`` (eq. distributed.14).
+
+    Source: Zhang et al. (2023), eq. 38 (the weighted sum).
 
     Parameters
     ----------
@@ -101,7 +105,7 @@ def weighted_gradients(
     membership : ndarray, shape (N, n_cells)
         1 where sensor i is a vertex of cell j (``SensorMesh.membership``).
     normalise : bool
-        Return the weighted mean (field unit / L) instead of the seed's weighted sum (field unit / L³).
+        Return the weighted mean (field unit / L) instead of the paper's weighted sum (field unit / L³).
 
     Returns
     -------
@@ -113,7 +117,7 @@ def weighted_gradients(
     weights = np.divide(membership, squared, out=np.zeros_like(squared), where=membership > 0)
     if normalise:
         weights /= weights.sum(axis=1, keepdims=True)
-    return weights @ gradients  # SPEC §4, seed eq. 38
+    return weights @ gradients  # docs/theory/distributed.md, eq. distributed.14
 
 
 def headings(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -124,16 +128,18 @@ def headings(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def desired_spacing(v: np.ndarray, links: np.ndarray, epsilon1: float, epsilon2: float, epsilon3: float):
-    """Desired spacing ``ρ_ii' = ε₁/(½‖v_i + v_i'‖² + ε₂) + ε₃`` of each link (seed eq. 39), shape (E,)."""
+    """Desired spacing ``ρ_ii' = ε₁/(½‖v_i + v_i'‖² + ε₂) + ε₃`` of each link (eq. distributed.15), shape (E,)."""
     pair_sum = v[links[:, 0]] + v[links[:, 1]]
-    return epsilon1 / (0.5 * np.sum(pair_sum**2, axis=-1) + epsilon2) + epsilon3  # SPEC §4, seed eq. 39
+    # docs/theory/distributed.md, eq. distributed.15
+    return epsilon1 / (0.5 * np.sum(pair_sum**2, axis=-1) + epsilon2) + epsilon3
 
 
 def spacing_term(positions: np.ndarray, links: np.ndarray, desired: np.ndarray) -> np.ndarray:
     """Stable spacing term ``f_i = Σ_i' (‖r_i − r_i'‖ − d_ii')(r_i' − r_i)/‖r_i' − r_i‖`` (eq. 43), (N, 2)."""
     diff = positions[links[:, 1]] - positions[links[:, 0]]  # r_i' − r_i
     dist = np.linalg.norm(diff, axis=-1)
-    pull = ((dist - desired) / dist)[:, None] * diff  # SPEC §4, seed eq. 43 (attractive when too far)
+    # docs/theory/distributed.md, eq. distributed.17 (attractive when too far)
+    pull = ((dist - desired) / dist)[:, None] * diff
     f = np.zeros_like(positions)
     np.add.at(f, links[:, 0], pull)
     np.add.at(f, links[:, 1], -pull)
@@ -211,7 +217,7 @@ class GradientFormation:
                 raise ValueError("the SUSD law needs the sensors' measurements")
             along = (
                 o.a * (o.desired_level - np.asarray(measurements))[:, None]
-            )  # SPEC §4, seed eq. 44 (stable sign)
+            )  # docs/theory/distributed.md, eq. distributed.18 (stable sign)
         else:
             along = o.a
-        return along * w + o.b * w_perp + o.c * f, desired  # SPEC §4, seed eq. 42
+        return along * w + o.b * w_perp + o.c * f, desired  # docs/theory/distributed.md, eq. distributed.16

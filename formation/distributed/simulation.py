@@ -1,9 +1,11 @@
-"""Closed-loop simulation of a sensor mesh in an advection–diffusion field (SPEC §4, seed §8), YAML form.
+"""Closed-loop simulation of a sensor mesh in an advection–diffusion field (docs/theory/distributed.md §9), YAML form.
+
+The scenario is that of Zhang et al. (2023), §8.
 
 Each step k (Δt apart): the sensors move by the gradient-based formation law using the constrained
 estimates of step k−1, measure ``p_i = z(r_i, t_k) + n_i`` (i.i.d. Gaussian, σ from the SNR), and the
 distributed filter runs Algorithm 1 (intra-cell update, messages, projection). The result is an
-:class:`xarray.Dataset` (see :func:`simulate`); :func:`error_table` makes the seed's Table 1 from it.
+:class:`xarray.Dataset` (see :func:`simulate`); :func:`error_table` makes the paper's Table 1 from it.
 
 Noise level: ``snr`` is the ratio of the field's mean power over a spatial period at t = 0, ``A²/4``
 for the product of sines of amplitude A, to the noise variance, so ``σ = A/(2√snr)``.
@@ -70,8 +72,8 @@ class AdvectionDiffusionSpec(StrictModel):
     velocity: Vector2 = Field([0.5, 1.0], description="v (L/s)")
     wavenumber: PositiveFloat = Field(0.003, description="k (1/L)")
     amplitude: PositiveFloat = 1.0
-    variant: Literal["exact", "seed"] = "exact"
-    temporal_wavenumber: PositiveFloat = Field(1e-4, description="k₂ of variant 'seed' (1/L)")
+    variant: Literal["exact", "paper"] = "exact"
+    temporal_wavenumber: PositiveFloat = Field(1e-4, description="k₂ of variant 'paper' (1/L)")
 
     def build(self) -> AdvectionDiffusionField:
         """The field object."""
@@ -196,7 +198,7 @@ def simulate(scenario: DistributedScenario, seed: int | None = None, progress: b
                 desired[k] = formation.desired_distances(positions[k], grad["constrained"][k])
                 break
             u, desired[k] = formation.velocities(positions[k], grad["constrained"][k], measured[k])
-            positions[k + 1] = positions[k] + dt * u  # seed eq. 40
+            positions[k + 1] = positions[k] + dt * u  # docs/theory/distributed.md, eq. distributed.16
             measured[k + 1] = field.value(positions[k + 1], t[k + 1]) + noise[k + 1]
             try:
                 network.step(positions[k + 1], measured[k + 1])
@@ -270,7 +272,7 @@ _DESCRIPTIONS = {
     "sensor_position": "sensor position",
     "measurement": "noisy field measurement of the sensor",
     "distance": "distance between the two sensors of an intra-cell link",
-    "desired_distance": "desired distance of the link (seed eq. 39 times its shape ratio)",
+    "desired_distance": "desired distance of the link (Zhang et al. (2023), eq. 39, times its shape ratio)",
     "link_sensors": "the two sensors of each intra-cell link",
     "cell_sensors": "sensors at the cell's vertices, counter-clockwise, -1 padded",
 }
@@ -298,7 +300,7 @@ class _progress:
 
 
 def error_table(ds: Any, statistics_from: float = 0.0) -> list[dict[str, float]]:
-    """Per-cell means and standard deviations of the errors (estimate − truth), like the seed's Table 1.
+    """Per-cell means and standard deviations of the errors (estimate − truth), like the paper's Table 1.
 
     Parameters
     ----------

@@ -1,4 +1,6 @@
-"""Leader–follower formation controls for unicycles: Controls 1, 2 and 3 (SPEC §3, seed 001 eqs. 9, 17, 24–25).
+"""Leader–follower formation controls for unicycles: Controls 1, 2 and 3 (docs/theory/leader_follower.md §3).
+
+Equation and theorem numbers are those of Karasalo & Hu (2010): Controls 1–3 are its eqs. 9, 17 and 24–25.
 
 Each control is a small class registered by name in :data:`CONTROLS` (so scenario files can say
 ``control: control2``) and implements :meth:`FormationControl.command`, mapping what follower ``i`` knows —
@@ -159,7 +161,9 @@ def make_control(name: str) -> FormationControl:
 
 @register_control
 class Control1(FormationControl):
-    """Reference-point tracking (seed Theorem 1, eq. 9): ``x_e' = −k x_e``, ``y_e' = −k y_e`` exactly.
+    """Reference-point tracking (docs/theory/leader_follower.md §3.1): ``x_e' = −k x_e``, ``y_e' = −k y_e`` exactly.
+
+    Source: Karasalo & Hu (2010), Theorem 1, eq. 9.
 
     Notes
     -----
@@ -184,16 +188,18 @@ class Control1(FormationControl):
         d0, beta0, k = reference.distance, reference.bearing, gain
         cos_b0 = _guard_cos(math.cos(beta0), "cos β0")
         _guard_positive(d0, "d0")
-        # SPEC §3, eq. 9 (v): v = k/cos β0 (d cos(β − β0) − d0 + (v_{i−1}/k) cos(γ + β0))
+        # eq. leader_follower.5 (v): v = k/cos β0 (d cos(β − β0) − d0 + (v_{i−1}/k) cos(γ + β0))
         v = (k * (d * math.cos(beta - beta0) - d0) + v_p * math.cos(gamma + beta0)) / cos_b0
-        # SPEC §3, eq. 9 (ω): ω = k/(d0 cos β0) (d sin β − d0 sin β0 − (v_{i−1}/k) sin γ)
+        # eq. leader_follower.5 (ω): ω = k/(d0 cos β0) (d sin β − d0 sin β0 − (v_{i−1}/k) sin γ)
         w = (k * (d * math.sin(beta) - d0 * math.sin(beta0)) - v_p * math.sin(gamma)) / (d0 * cos_b0)
         return v, w
 
 
 @register_control
 class Control2(FormationControl):
-    """Monotone bearing convergence (seed Theorem 2, eq. 17): ``d̂ = d cos β − d0 cos β0`` decays as ``e^{−kt}``.
+    """Monotone bearing convergence: ``d̂ = d cos β − d0 cos β0`` decays as ``e^{−kt}``.
+
+    Theory: docs/theory/leader_follower.md §3.2; source: Karasalo & Hu (2010), Theorem 2, eq. 17.
 
     Notes
     -----
@@ -221,16 +227,18 @@ class Control2(FormationControl):
         d0, beta0, k = reference.distance, reference.bearing, gain
         cos_b = _guard_cos(math.cos(beta), "cos β")
         _guard_positive(d, "d")
-        # SPEC §3, eq. 17 (v): v = k/cos β (d − d0 cos(β − β0) + (v_{i−1}/k) cos(γ + β))
+        # eq. leader_follower.7 (v): v = k/cos β (d − d0 cos(β − β0) + (v_{i−1}/k) cos(γ + β))
         v = (k * (d - d0 * math.cos(beta - beta0)) + v_p * math.cos(gamma + beta)) / cos_b
-        # SPEC §3, eq. 17 (ω): ω = k/(d cos β) (d sin β − d0 sin β0 − (v_{i−1}/k) sin γ)
+        # eq. leader_follower.7 (ω): ω = k/(d cos β) (d sin β − d0 sin β0 − (v_{i−1}/k) sin γ)
         w = (k * (d * math.sin(beta) - d0 * math.sin(beta0)) - v_p * math.sin(gamma)) / (d * cos_b)
         return v, w
 
 
 @register_control
 class Control3(Control1):
-    """Control 1 plus feed-forward of time-varying ``d0(t), β0(t)`` (seed Theorem 3, eqs. 24–25).
+    """Control 1 plus feed-forward of time-varying ``d0(t), β0(t)`` (docs/theory/leader_follower.md §3.4).
+
+    Source: Karasalo & Hu (2010), Theorem 3, eqs. 24–25.
 
     Notes
     -----
@@ -253,8 +261,8 @@ class Control3(Control1):
         d0, beta0 = reference.distance, reference.bearing
         d0_dot, beta0_dot = reference.distance_rate, reference.bearing_rate
         cos_b0 = math.cos(beta0)
-        # SPEC §3, eq. 25: [Δv, Δω] = −1/(d0 cos β0) [ḋ0 d0, ḋ0 sin β0 + β̇0 d0 cos β0]
+        # eq. leader_follower.11: [Δv, Δω] = −1/(d0 cos β0) [ḋ0 d0, ḋ0 sin β0 + β̇0 d0 cos β0]
         dv = -d0_dot * d0 / (d0 * cos_b0)
         dw = -(d0_dot * math.sin(beta0) + beta0_dot * d0 * cos_b0) / (d0 * cos_b0)
-        # SPEC §3, eq. 24: ṽ = v + Δv, ω̃ = ω + Δω
+        # eq. leader_follower.11: ṽ = v + Δv, ω̃ = ω + Δω
         return v + dv, w + dw

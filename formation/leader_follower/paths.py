@@ -1,7 +1,9 @@
-"""Path geometry for leader–follower path following (seed 001 §8.3, Fig. 13 and eq. 54).
+"""Path geometry for leader–follower path following (docs/theory/leader_follower.md §4.3, §5).
+
+Source: Karasalo & Hu (2010), §8.3, Fig. 13 and eq. 54.
 
 * :func:`chord_window` — the furthest point back on a recorded path whose chord to the path's end keeps the
-  area between path and chord (the tinted area of the seed's Fig. 13) below a tolerance; it defines the
+  area between path and chord (the tinted area of the paper's Fig. 13) below a tolerance; it defines the
   dynamic formation parameters of :class:`~mobisense.formation.leader_follower.references.PathReference`.
 * :func:`path_deviation` — the deviation of a follower from the path its predecessor has travelled (eq. 54).
 
@@ -164,7 +166,9 @@ def _largest_admissible_quadratic(q: np.ndarray, step: np.ndarray, bound: float)
 
 
 def path_deviation(predecessor: np.ndarray, follower: np.ndarray) -> np.ndarray:
-    """Deviation of a follower from its predecessor's travelled path (seed eq. 54).
+    """Deviation of a follower from its predecessor's travelled path (eq. leader_follower.15).
+
+    Source: Karasalo & Hu (2010), eq. 54.
 
     Parameters
     ----------

@@ -3,7 +3,7 @@
 The dataset is the one of :func:`mobisense.formation.leader_follower.runs.simulate_scenario`.
 
 Each function returns a matplotlib ``Figure`` (to be saved with :func:`mobisense.core.files.write_figure`):
-paths (seed Figs. 10, 14–15), ``d − d0`` and ``β − β0`` (Fig. 11), ``x_e, y_e`` (Figs. 12, 21), path
+paths (Karasalo & Hu (2010), Figs. 10, 14–15), ``d − d0`` and ``β − β0`` (Fig. 11), ``x_e, y_e`` (Figs. 12, 21), path
 deviation (eq. 54, Fig. 16), the formation parameters ``d0(t), β0(t)`` (Figs. 17–19) and the switching
 filter's active pairs.
 """
@@ -78,7 +78,7 @@ def plot_paths(result: xr.Dataset):  # noqa: ANN201  (matplotlib Figure)
 
 
 def plot_formation_errors(result: xr.Dataset):  # noqa: ANN201
-    """``d − d0`` and ``β − β0`` over time for every run and follower (seed Figs. 11, 20)."""
+    """``d − d0`` and ``β − β0`` over time for every run and follower (Karasalo & Hu (2010), Figs. 11, 20)."""
     import matplotlib.pyplot as plt
 
     fig, (ax_d, ax_b) = plt.subplots(2, 1, figsize=(8, 6.4), sharex=True)
@@ -100,7 +100,7 @@ def plot_formation_errors(result: xr.Dataset):  # noqa: ANN201
 
 
 def plot_reference_point_errors(result: xr.Dataset):  # noqa: ANN201
-    """``x_e``, ``y_e`` and ``‖(x_e, y_e)‖`` (log scale, with ``‖e(0)‖ e^{−kt}`` dotted) — seed Figs. 12, 21."""
+    """``x_e``, ``y_e`` and ``‖(x_e, y_e)‖`` (log scale, with ``‖e(0)‖ e^{−kt}`` dotted) — the paper's Figs. 12, 21."""
     import matplotlib.pyplot as plt
 
     fig, (ax_x, ax_y, ax_n) = plt.subplots(3, 1, figsize=(8, 8.4), sharex=True)
@@ -129,7 +129,7 @@ def plot_reference_point_errors(result: xr.Dataset):  # noqa: ANN201
 
 
 def plot_deviation(result: xr.Dataset):  # noqa: ANN201
-    """Deviation of each follower from its predecessor's travelled path (eq. 54, seed Fig. 16)."""
+    """Deviation of each follower from its predecessor's travelled path (Karasalo & Hu (2010), eq. 54, Fig. 16)."""
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(8, 4.2))
@@ -147,7 +147,7 @@ def plot_deviation(result: xr.Dataset):  # noqa: ANN201
 
 
 def plot_references(result: xr.Dataset):  # noqa: ANN201
-    """Formation parameters ``d0(t)`` and ``β0(t)`` (seed Figs. 17–19)."""
+    """Formation parameters ``d0(t)`` and ``β0(t)`` (Karasalo & Hu (2010), Figs. 17–19)."""
     import matplotlib.pyplot as plt
 
     fig, (ax_d, ax_b) = plt.subplots(2, 1, figsize=(8, 5.6), sharex=True)

@@ -1,13 +1,15 @@
-"""Formation-parameter schedules ``d0(t), β0(t)`` for leader–follower controls (seed 001 §6.2, §8.3).
+"""Formation-parameter schedules ``d0(t), β0(t)`` for leader–follower controls (docs/theory/leader_follower.md §4).
+
+Source: Karasalo & Hu (2010), §6.2, §8.3.
 
 A schedule is a small class registered in :data:`REFERENCES` and evaluated with
 :meth:`ReferenceSchedule.at`, which returns a :class:`~mobisense.formation.leader_follower.controls.FormationReference`
 (``d0, β0`` and, when known, their rates — Control 3 needs them).
 
 * :class:`ConstantReference` — fixed ``d0, β0`` (Theorems 1 and 2).
-* :class:`BearingRampReference` — the seed's eq. 55: ``β̇0 = c``, ``ḋ0 = a cos(f β0)``, in closed form.
-* :class:`PathReference` — dynamic parameters for path following (seed §8.3, Fig. 13): the follower aims at
-  the furthest point of its predecessor's travelled path whose chord keeps the area between path and chord
+* :class:`BearingRampReference` — Karasalo & Hu (2010), eq. 55: ``β̇0 = c``, ``ḋ0 = a cos(f β0)``, in closed form.
+* :class:`PathReference` — dynamic parameters for path following (Karasalo & Hu (2010), §8.3, Fig. 13): the follower
+  aims at the furthest point of its predecessor's travelled path whose chord keeps the area between path and chord
   below ``A_max``; needs the predecessor's path history, so it is updated at sample instants.
 """
 
@@ -92,7 +94,9 @@ class ConstantReference(ReferenceSchedule):
 
 @register_reference
 class BearingRampReference(ReferenceSchedule):
-    """Bearing ramp with a bearing-dependent distance rate (seed eq. 55, generalised).
+    """Bearing ramp with a bearing-dependent distance rate (eq. leader_follower.12).
+
+    Source: Karasalo & Hu (2010), eq. 55, generalised.
 
     Parameters
     ----------
@@ -109,14 +113,15 @@ class BearingRampReference(ReferenceSchedule):
 
     Notes
     -----
-    The seed prints eq. 55 as ``d0 = 0.1 cos(45 β0)``, ``β̇0 = 0.001``, ``d0(0) = 0.5``, ``β0(0) = π/7``; taken
-    literally ``d0(0) = 0.1 cos(45π/7) ≈ 0.022 ≠ 0.5``, so the OCR lost a dot: we read the first line as the
+    The paper prints eq. 55 as ``d0 = 0.1 cos(45 β0)``, ``β̇0 = 0.001``, ``d0(0) = 0.5``, ``β0(0) = π/7``; taken
+    literally ``d0(0) = 0.1 cos(45π/7) ≈ 0.022 ≠ 0.5``, so a dot was lost in print: we read the first line as the
     rate ``ḋ0 = 0.1 cos(45 β0)``. Then (closed form, ``c ≠ 0``)::
 
         β0(t) = β0(0) + c t
         d0(t) = d0(0) + a/(f c) [sin(f β0(t)) − sin(f β0(0))]
 
-    which stays in [0.5, 0.556] over the seed's 10 s window (a bump, consistent with its Fig. 19).
+    which over the paper's 10 s window rises from 0.5 to ≈ 0.556 at t ≈ 5 s and falls back, dipping slightly
+    below its start to 0.4994 at t = 10 s (a bump, consistent with its Fig. 19).
     """
 
     kind = "ramp"
@@ -148,7 +153,9 @@ class BearingRampReference(ReferenceSchedule):
 
 @register_reference
 class PathReference(ReferenceSchedule):
-    """Dynamic parameters keeping the follower on its predecessor's path (seed §8.3, Fig. 13).
+    """Dynamic parameters keeping the follower on its predecessor's path (docs/theory/leader_follower.md §4.3).
+
+    Source: Karasalo & Hu (2010), §8.3, Fig. 13.
 
     Parameters
     ----------
@@ -162,7 +169,7 @@ class PathReference(ReferenceSchedule):
 
     Notes
     -----
-    The seed defines the parameters only in words ("steer toward a position on the path of R_{i−1} such that
+    The paper defines the parameters only in words ("steer toward a position on the path of R_{i−1} such that
     d0 is maximised while the area of Fig. 13 is below A_max"). Our reading: walk back along the
     predecessor's recorded path from its current position ``P_m`` to the furthest point ``P`` with area ≤
     ``A_max`` and chord ≤ ``max_distance`` (see :func:`~mobisense.formation.leader_follower.paths.chord_window`). A
@@ -170,7 +177,7 @@ class PathReference(ReferenceSchedule):
 
         d0 = ‖P_m − P‖,   β0 = angle(P_m − P) − tangent heading at P,
 
-    which are the parameters returned. Their rates are unknown (``provides_rates = False``): the seed uses
+    which are the parameters returned. Their rates are unknown (``provides_rates = False``): the paper uses
     Control 1 with them, whose error is then bounded by ``M/k`` (eq. 23).
     """
 

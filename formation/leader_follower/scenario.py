@@ -1,4 +1,6 @@
-"""Scenario files for ``mobisense simulate leader-follower``: strict pydantic models (SPEC §3, seed 001 §8).
+"""Scenario files of ``mobisense simulate leader-follower``, strict pydantic models (docs/theory/leader_follower.md §9).
+
+The shipped scenarios are those of Karasalo & Hu (2010), §8.
 
 A scenario describes one leader, a chain of followers, the formation reference, the control, the sensing
 and the timing; ``runs`` lists named variants overriding ``control``, ``reference`` and/or ``sensing`` (e.g.
@@ -82,7 +84,7 @@ class ConstantReferenceConfig(StrictModel):
     """Constant ``d0`` (m) and ``β0`` (rad).
 
     ``distance_from_run: NAME`` instead of ``distance`` sets ``d0`` to the mean inter-agent distance measured in
-    the earlier run ``NAME`` (the seed's "fair comparison" of constant and dynamic parameters, §8.3).
+    the earlier run ``NAME`` (the paper's "fair comparison" of constant and dynamic parameters, §8.3).
     """
 
     kind: Literal["constant"]
@@ -98,7 +100,10 @@ class ConstantReferenceConfig(StrictModel):
 
 
 class RampReferenceConfig(StrictModel):
-    """Seed eq. 55 generalised: ``β̇0 = bearing_rate``, ``ḋ0 = a cos(f β0)`` (``a, f`` = ``distance_rate_*``)."""
+    """Eq. 55 of Karasalo & Hu (2010), generalised: ``β̇0 = bearing_rate``, ``ḋ0 = a cos(f β0)``.
+
+    ``a, f`` are ``distance_rate_amplitude`` and ``distance_rate_frequency``.
+    """
 
     kind: Literal["ramp"]
     distance: PositiveFloat
@@ -109,7 +114,7 @@ class RampReferenceConfig(StrictModel):
 
 
 class PathReferenceConfig(StrictModel):
-    """Dynamic path-following parameters (seed §8.3, Fig. 13): area tolerance ``A_max`` (m²) and bounds."""
+    """Dynamic path-following parameters (Karasalo & Hu (2010), §8.3, Fig. 13): tolerance ``A_max`` (m²) and bounds."""
 
     kind: Literal["path"]
     max_area: PositiveFloat
@@ -129,7 +134,7 @@ class ExactSensingConfig(StrictModel):
 
 
 class RingSensingConfig(StrictModel):
-    """Directional range-sensor ring + switching Kalman filter (defaults: Khepera II layout, seed Fig. 4)."""
+    """Directional range-sensor ring + switching Kalman filter (default: Khepera II, Karasalo & Hu (2010), Fig. 4)."""
 
     mode: Literal["ring"]
     max_range: PositiveFloat

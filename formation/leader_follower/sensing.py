@@ -4,8 +4,9 @@ Two sensing modes (``sensing: {mode: …}`` in scenario files), both returning a
 
 * :class:`ExactSensing` — the true ``(d, β, γ, v_{i−1})`` (for analysis; the closed loop is then continuous);
 * :class:`RingSensing` — a :class:`~mobisense.estimation.tracking.range_ring.RangeSensorRing` read at the sample
-  instants, fed to a :class:`~mobisense.estimation.tracking.switching_filter.SwitchingKalmanFilter` (seed
-  Algorithm 7.1), whose estimate gives ``d, β, φ_{i−1}, γ, v_{i−1}`` by eqs. 49–53 (:func:`relative_from_estimate`).
+  instants, fed to a :class:`~mobisense.estimation.tracking.switching_filter.SwitchingKalmanFilter`
+  (Karasalo & Hu (2010), Algorithm 7.1), whose estimate gives ``d, β, φ_{i−1}, γ, v_{i−1}`` by eqs. 49–53
+  (:func:`relative_from_estimate`).
 """
 
 from __future__ import annotations
@@ -61,7 +62,9 @@ def exact_measurement(follower: np.ndarray, predecessor: np.ndarray, predecessor
 
 
 def relative_from_estimate(pose: np.ndarray, state: np.ndarray) -> RelativeMeasurement:
-    """Relative state from a follower's own pose and the estimated predecessor state (seed eqs. 49–53).
+    """Relative state from a follower's own pose and the estimated predecessor state (eq. leader_follower.22).
+
+    Source: Karasalo & Hu (2010), eqs. 49–53.
 
     Parameters
     ----------
@@ -76,7 +79,7 @@ def relative_from_estimate(pose: np.ndarray, state: np.ndarray) -> RelativeMeasu
 
     Notes
     -----
-    ``atan2`` replaces the seed's ``tan⁻¹`` (quadrant-correct). The predecessor's heading is taken from the
+    ``atan2`` replaces the paper's ``tan⁻¹`` (quadrant-correct). The predecessor's heading is taken from the
     estimated velocity, ``φ_{i−1} = atan2(ẏ, ẋ)``, instead of the difference of consecutive position estimates
     (eq. 52): the two agree for the constant-velocity model, the former without the measurement noise
     that the difference of two filtered positions carries.

@@ -1,4 +1,6 @@
-"""Closed-loop simulation of a leader and a chain of unicycle followers (SPEC §3, seed 001 §8).
+"""Closed-loop simulation of a leader and a chain of unicycle followers (docs/theory/leader_follower.md §9).
+
+The scenarios are those of Karasalo & Hu (2010), §8.
 
 :func:`simulate` integrates the agents' kinematics with ``scipy.integrate.solve_ivp`` and returns an
 ``xarray.Dataset``. Two regimes, chosen from the problem:
@@ -161,7 +163,7 @@ def _integrate(
     def rates(t: float, s: np.ndarray) -> np.ndarray:
         poses = s.reshape(-1, 3)
         v, w = _agent_inputs(problem, t, poses, reference_at, held)
-        return unicycle_rates(poses, v, w).ravel()  # SPEC §3 (seed eq. 1)
+        return unicycle_rates(poses, v, w).ravel()  # docs/theory/leader_follower.md, eq. leader_follower.1
 
     cfg = problem.integration
     sol = solve_ivp(rates, span, state, method=cfg.method, rtol=cfg.rtol, atol=cfg.atol, t_eval=t_eval)

@@ -1,4 +1,6 @@
-"""Unicycle kinematics and the leader–follower relative state (SPEC §3, seed 001 eqs. 1–4, 8, 10).
+"""Unicycle kinematics and the leader–follower relative state (docs/theory/leader_follower.md §1–§2).
+
+Source: Karasalo & Hu (2010), eqs. 1–4, 8, 10.
 
 Poses are arrays ``(..., 3)`` holding ``(x, y, φ)``: position (m) and heading (rad, counter-clockwise from
 the x axis). Follower ``i`` tracks its predecessor ``i − 1``; the relative state is
@@ -42,7 +44,7 @@ def unicycle_rates(pose: np.ndarray, speed: np.ndarray | float, turn_rate: np.nd
     """
     pose = np.asarray(pose, dtype=float)
     phi = pose[..., 2]
-    # SPEC §3 (seed eq. 1): x' = v cos φ, y' = v sin φ, φ' = ω
+    # docs/theory/leader_follower.md, eq. leader_follower.1: x' = v cos φ, y' = v sin φ, φ' = ω
     return np.stack(np.broadcast_arrays(speed * np.cos(phi), speed * np.sin(phi), turn_rate + 0.0 * phi), axis=-1)
 
 
@@ -82,7 +84,9 @@ def relative_rates(
     predecessor_speed: np.ndarray | float,
     predecessor_turn_rate: np.ndarray | float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Rates of change of ``(d, β, γ)`` (seed eqs. 2–4).
+    """Rates of change of ``(d, β, γ)`` (docs/theory/leader_follower.md, eq. leader_follower.2).
+
+    Source: Karasalo & Hu (2010), eqs. 2–4.
 
     Parameters
     ----------
@@ -99,11 +103,11 @@ def relative_rates(
         m/s, rad/s, rad/s.
     """
     v, w, v_p, w_p = speed, turn_rate, predecessor_speed, predecessor_turn_rate
-    # SPEC §3, eq. 2: d' = −v_i cos β + v_{i−1} cos(γ + β)
+    # eq. leader_follower.2 (the paper's eq. 2): d' = −v_i cos β + v_{i−1} cos(γ + β)
     d_dot = -v * np.cos(beta) + v_p * np.cos(gamma + beta)
-    # SPEC §3, eq. 3: β' = −ω_i + (v_i/d) sin β − (v_{i−1}/d) sin(γ + β)
+    # eq. leader_follower.2 (the paper's eq. 3): β' = −ω_i + (v_i/d) sin β − (v_{i−1}/d) sin(γ + β)
     beta_dot = -w + (v / d) * np.sin(beta) - (v_p / d) * np.sin(gamma + beta)
-    # SPEC §3, eq. 4: γ' = ω_i − ω_{i−1}
+    # eq. leader_follower.2 (the paper's eq. 4): γ' = ω_i − ω_{i−1}
     gamma_dot = w - w_p + 0.0 * d_dot
     return np.asarray(d_dot), np.asarray(beta_dot), np.asarray(gamma_dot)
 
@@ -114,7 +118,9 @@ def reference_point_error(
     distance: np.ndarray | float,
     bearing: np.ndarray | float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Reference-point error ``(x_e, y_e)`` of a follower (seed eqs. 8 and 10).
+    """Reference-point error ``(x_e, y_e)`` of a follower (docs/theory/leader_follower.md, eq. leader_follower.3).
+
+    Source: Karasalo & Hu (2010), eqs. 8 and 10.
 
     Parameters
     ----------
@@ -131,7 +137,8 @@ def reference_point_error(
     follower = np.asarray(follower, dtype=float)
     predecessor = np.asarray(predecessor, dtype=float)
     heading = follower[..., 2] + bearing
-    # SPEC §3 (seed eq. 10): x_e = x_i + d0 cos(φ_i + β0) − x_{i−1}, y_e likewise with sin
+    # docs/theory/leader_follower.md, eq. leader_follower.3:
+    # x_e = x_i + d0 cos(φ_i + β0) − x_{i−1}, y_e likewise with sin
     xe = follower[..., 0] + distance * np.cos(heading) - predecessor[..., 0]
     ye = follower[..., 1] + distance * np.sin(heading) - predecessor[..., 1]
     return xe, ye

@@ -1,16 +1,16 @@
 """The estimator in the replay loop: cooperative Kalman filter + Hessian source, and what the controller sees.
 
 :class:`ClosedLoopEstimator` wraps :class:`~mobisense.estimation.cooperative.filter.CooperativeKalmanFilter`
-(SPEC §2.2) for one mission: at each sample it predicts to the new formation centre, asks its Hessian
-source for ``Ĥ_{c,k}`` (SPEC §2.5) and fuses the platforms' measurements. With spatially correlated
-noise ``w`` the measurement covariance is ``R_k = σ2² I + W(r_k)`` (the kernel at the platform
-positions): ``w`` is treated as white with its true marginal covariance, its correlation along the path
-is ignored (the seed's w = 0 filter, made consistent at each instant).
+(docs/theory/replay.md §2.2, docs/theory/cooperative.md §2) for one mission: at each sample it predicts to the new
+formation centre, asks its Hessian source for ``Ĥ_{c,k}`` (docs/theory/hessian.md §5) and fuses the platforms'
+measurements. With spatially correlated noise ``w`` the measurement covariance is ``R_k = σ2² I + W(r_k)`` (the kernel
+at the platform positions): ``w`` is treated as white with its true marginal covariance, its correlation along the path
+is ignored (the w = 0 filter of Zhang & Leonard (2010), §III-A, made consistent at each instant; eq. replay.6).
 
 Between samples the controllers see the filter's Taylor prediction at the moving centre
 (:meth:`ClosedLoopEstimator.derivatives`): ``s(r) = A(Δr) s_k(+) + h(Ĥ_k, Δr)`` with ``Δr = r − r_{c,k}``
-(SPEC §2.1, eq. 9) — the same model the next prediction uses. :class:`TrueField` gives the exact value
-and derivatives instead (``derivatives: true_field``).
+(docs/theory/replay.md, eq. replay.7) — the same model the next prediction uses. :class:`TrueField` gives the exact
+value and derivatives instead (``derivatives: true_field``).
 
 Hessian feedback: ``Ĥ`` enters the next prediction (``h = [½Δr'ĤΔr, ĤΔr]``), so a noisy snapshot
 estimate (the curvature method divides measurement noise by ``a²``) is fed back into ``∇ẑ`` and from
@@ -90,7 +90,7 @@ class ClosedLoopEstimator:
     Parameters
     ----------
     noise : CooperativeNoise
-        ``M, R = σ2² I, U`` (SPEC §2.4).
+        ``M, R = σ2² I, U`` (docs/theory/steady_state.md §2).
     spatial_noise : SpatialNoise or None
         Kernel of ``w``; adds ``W(r_k)`` to ``R`` at every sample.
     hessian : {"curvature", "least_squares", "window", "true_field", "fixed"}
@@ -189,7 +189,7 @@ class ClosedLoopEstimator:
         return formation_center(self.filter.positions)
 
     def derivatives(self, r: np.ndarray, t: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Predicted ``(z, ∇z, Ĥ)`` at ``r`` (2,) from the last posterior (SPEC §2.1, eq. 9)."""
+        """Predicted ``(z, ∇z, Ĥ)`` at ``r`` (2,) from the last posterior (docs/theory/replay.md, eq. replay.7)."""
         shift = np.asarray(r, float) - self.center
         s = transition_matrix(shift) @ self.state + hessian_drift(self.hessian, shift)
         return s[0], s[1:], self.hessian

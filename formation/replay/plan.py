@@ -9,10 +9,10 @@
    sampling period ``Δt``, on ``runs`` independent realisations at once (batched; the covariance recursion
    is shared): truth ``x_k = F x_{k−1} + w_k`` with ``F = e^{AΔt}`` and ``w_k ~ N(0, Q_d)``,
    ``Q_d = ∫_0^Δt e^{As} BQB' e^{A's} ds`` (Van Loan), ``x_0 ~ N(0, Σ0)``, estimate started at 0; samples
-   ``y_k = C x_k + ν_k`` with ``ν_k ~ N(0, R(p_k)/Δt)`` — the discrete equivalent of continuous
-   measurements with spectral density ``R`` (SPEC §1.1), whose filter covariance tends to the Riccati
-   solution as ``Δt → 0`` (first order in Δt, tested). ``R(p)`` comes from the noise models' symbolic
-   ``variance(p, s, θ)`` (one measurement model for the optimiser and the replay).
+   ``y_k = C x_k + ν_k`` with ``ν_k ~ N(0, R(p_k)/Δt)`` — the discrete equivalent of continuous measurements with
+   spectral density ``R`` (docs/theory/ocp.md §1.2, eq. ocp.2), whose filter covariance tends to the Riccati solution as
+   ``Δt → 0`` (first order in Δt, tested). ``R(p)`` comes from the noise models' symbolic ``variance(p, s, θ)`` (one
+   measurement model for the optimiser and the replay).
 3. **Comparison.** Errors ``e_k`` against the optimiser's ``Σ(t_k)``: empirical covariance, the average
    NEES ``ε̄_k = mean_b e_k' Σ(t_k)⁻¹ e_k`` with its two-sided χ² band (``B ε̄_k ~ χ²_{nB}`` if Σ is right),
    the same against the filter's own ``P_k``, and the delivered ``Tr[M E(tf)]`` against the promised
@@ -148,7 +148,7 @@ def discretise_process(A: np.ndarray, BQB: np.ndarray, dt: float) -> tuple[np.nd
 
 
 def measurement_variances(problem: Problem, positions: np.ndarray) -> np.ndarray:
-    """Variances ``r`` of every measurement row at the sensor positions, from the noise models (SPEC §1.2).
+    """Variances ``r`` of every measurement row at the sensor positions, by the noise models (docs/theory/ocp.md §1.3).
 
     Parameters
     ----------
@@ -265,7 +265,7 @@ def monte_carlo_filter(
     for k in range(1, len(times)):
         x_true = F @ x_true + L_Q @ rng.standard_normal((runs, n, 1))
         y = C @ x_true + np.sqrt(R[k])[:, None] * rng.standard_normal((runs, len(R[k]), 1))
-        x_hat, P = kalman.predict(x_hat, P, F, Qd)  # SPEC §2.2, eqs. 13-14 (same kernels)
+        x_hat, P = kalman.predict(x_hat, P, F, Qd)  # docs/theory/cooperative.md, eq. cooperative.6 (same kernels)
         x_hat, P, _, _ = kalman.update(x_hat, P, y, C, np.diag(R[k]))  # Joseph form
         P = kalman.symmetrize(P)
         errors.append(x_hat - x_true)

@@ -1,4 +1,4 @@
-"""Optimised sensor trajectories as references to track (the OCP → control link of SPEC §2.8 / issue 5).
+"""Optimised sensor trajectories as references to track (the OCP → control link, docs/theory/replay.md §1.1).
 
 * :func:`load_or_solve` — a ``solution.nc`` written by ``mobisense solve``, or, when the file does not
   exist yet, the solution of the problem it came from, solved here by :func:`mobisense.ocp.direct.solver.solve_direct`

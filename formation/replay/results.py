@@ -5,11 +5,11 @@ Variables of the dataset (dimension ``time`` = the filter samples):
 * ``z_true, z_est`` (time), ``grad_true, grad_est`` (time, xy) at the formation centre; ``z_std``,
   ``grad_std`` from the filter covariance; ``hess_true, hess_est`` (time, xy, xy2);
 * ``r, v`` (time, platform, xy), ``center`` (time, xy), ``measurements`` (time, platform);
-* ``a, b`` — half-distances ``½‖r2 − r1‖``, ``½‖r3 − r4‖`` (the seed's shape variables; b is NaN for
-  N < 4) — and their desired values ``a_desired, b_desired``; ``shape_error = ‖q − q^d‖``;
-* ``theta`` — heading error of the centre w.r.t. the true level curve through it (SPEC §2.7),
-  ``theta_est`` the one the controller saw from the estimate; ``lyapunov`` ``V(θ, z)`` on the true field
-  (level-curve motion); ``reference, reference_error`` (reference motion);
+* ``a, b`` — half-distances ``½‖r2 − r1‖``, ``½‖r3 − r4‖`` (the shape variables of Zhang & Leonard (2010), §III-D; b is
+  NaN for N < 4) — and their desired values ``a_desired, b_desired``; ``shape_error = ‖q − q^d‖``;
+* ``theta`` — heading error of the centre w.r.t. the true level curve through it (docs/theory/level_curve.md,
+  eq. level_curve.3), ``theta_est`` the one the controller saw from the estimate; ``lyapunov`` ``V(θ, z)`` on the true
+  field (level-curve motion); ``reference, reference_error`` (reference motion);
 * attributes: the level ``C`` (NaN for reference motion), units, scenario name, seed.
 """
 

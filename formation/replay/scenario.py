@@ -1,4 +1,4 @@
-"""Scenario files of ``mobisense replay`` on a field (SPEC §2.6-2.8): validated pydantic models.
+"""Scenario files of ``mobisense replay`` on a field (docs/theory/replay.md §2): validated pydantic models.
 
 A field replay names the field and its spatial noise, the platforms, the formation (shape controller and
 its gains), the motion of the centre (level-curve tracking or an optimised reference), the cooperative
@@ -13,12 +13,11 @@ filter, the duration and the filter period, e.g. ``problems/replay_isotherm13.ya
     duration: 48.0
     time_step: 0.05
 
-Formations (``kind``): ``cross`` (four platforms, SPEC §2.4 shape ``a, b`` fixed, from the steady-state
-design, from a ``mobisense steady-state`` summary, or adapted online by step 3A), ``rigid`` (any offsets)
+Formations (``kind``): ``cross`` (four platforms, docs/theory/steady_state.md §2 shape ``a, b`` fixed, from the
+steady-state design, from a ``mobisense steady-state`` summary, or adapted online by step 3A), ``rigid`` (any offsets)
 and ``rotating`` (offsets turning at ``angular_speed``, eqs. 42-43). Motions: ``level_curve`` (eq. 48;
-``derivatives: true_field`` feeds the true field to the controller, for testing) and ``reference`` (the centre
-tracks sensor ``sensor`` of a ``solution.nc``). Every error is reported as ``FILE: key.path: …`` before
-anything is written.
+``derivatives: true_field`` feeds the true field to the controller, for testing) and ``reference`` (the centre tracks
+sensor ``sensor`` of a ``solution.nc``). Every error is reported as ``FILE: key.path: …`` before anything is written.
 """
 
 from __future__ import annotations
@@ -127,17 +126,19 @@ class ShapeBoundsConfig(StrictModel):
 
 
 class SteadyStateShape(StrictModel):
-    """Design ``(a, b)`` minimising ``tr P∞`` (SPEC §2.4) with the filter's noise, within bounds."""
+    """Design ``(a, b)`` minimising ``tr P∞`` for the filter's noise within bounds (docs/theory/steady_state.md §3)."""
 
     bounds: ShapeBoundsConfig
     equal_sides: bool = False
 
 
 class AdaptiveShape(StrictModel):
-    """Step 3A of SPEC §2.4 every ``every`` filter steps, each change of a and b at most ``max_change`` (L).
+    """Step 3A every ``every`` filter steps, each change of a and b at most ``max_change`` (L).
 
-    The rate limit makes the seed's assumption that "the optimal formation will not change very fast"
-    hold: without it the minimiser of ``J_k`` can jump between distant local minima (the covariance it
+    Step 3A is that of docs/theory/steady_state.md §5.
+
+    The rate limit makes the assumption of Zhang & Leonard (2010), §III-E, that "the optimal formation will not change
+    very fast" hold: without it the minimiser of ``J_k`` can jump between distant local minima (the covariance it
     depends on responds to the shape), and the formation would chase them.
     """
 
@@ -177,7 +178,7 @@ class _Oriented(StrictModel):
 
 
 class CrossFormation(_Oriented):
-    """The four-platform cross of SPEC §2.4 (1, 2 at ∓a on e1; 3, 4 at ±b on e2)."""
+    """The four-platform cross of docs/theory/steady_state.md §2 (1, 2 at ∓a on e1; 3, 4 at ±b on e2)."""
 
     kind: Literal["cross"] = "cross"
     shape: ShapeConfig
@@ -199,7 +200,10 @@ class RotatingGains(StrictModel):
 
 
 class RotatingFormation(StrictModel):
-    """Body-frame ``offsets`` rotating about the centre at ``angular_speed`` (rad/T), SPEC §2.6 eqs. 42-43."""
+    """Body-frame ``offsets`` turning about the centre at ``angular_speed`` (rad/T).
+
+    Theory: docs/theory/formation_control.md §3.
+    """
 
     kind: Literal["rotating"] = "rotating"
     offsets: list[Vector2]
@@ -219,7 +223,7 @@ class LevelFunctionConfig(StrictModel):
 
 
 class LevelCurveMotion(StrictModel):
-    """Level-curve tracking of the centre (SPEC §2.7)."""
+    """Level-curve tracking of the centre (docs/theory/level_curve.md)."""
 
     kind: Literal["level_curve"] = "level_curve"
     level: FiniteFloat
@@ -251,7 +255,9 @@ MOTIONS: dict[str, type[StrictModel]] = {"level_curve": LevelCurveMotion, "refer
 
 
 class FilterConfig(StrictModel):
-    """The cooperative Kalman filter in the loop (SPEC §2.2) and its Hessian source (SPEC §2.5).
+    """The cooperative Kalman filter in the loop and its Hessian source.
+
+    Theory: docs/theory/replay.md §2.2 and docs/theory/hessian.md §5.
 
     ``hessian``: ``curvature`` (four-platform cross, s.1-s.8), ``least_squares`` (formations whose
     ``[x²/2, xy, y²/2]`` design has rank 3), ``window`` (joint quadratic fit to the last ``window`` steps'
@@ -344,7 +350,7 @@ class FieldReplayScenario(StrictModel):
             ):
                 raise InvalidValue(
                     "formation.offsets", "a collinear rigid formation never observes the gradient across it "
-                    "(SPEC §2.3, Cd5): use kind: rotating"
+                    "(docs/theory/cooperative.md §4, Cd5): use kind: rotating"
                 )  # fmt: skip
         if self.filter.hessian == "curvature" and not isinstance(formation, CrossFormation):
             raise InvalidValue(

@@ -1,11 +1,13 @@
-"""Shape tasks of the replay: desired Jacobi vectors over time and the controller that holds them (SPEC §2.6).
+"""Shape tasks of the replay: desired Jacobi vectors over time and the controller that holds them.
 
-* :class:`OrientedShape` — body-frame offsets (the cross with its current ``a, b``, or any rigid shape)
-  turned to the formation angle φ: fixed, or the direction of the centre velocity (the seed's
-  "platforms 1-2 along the level curve": at θ = 0 the velocity is the level-curve tangent). The desired
-  vectors ``q^d = g(φ) p^d`` move with φ; the feed-forward uses ``φ' = (r_c' × r_c'')/‖r_c'‖²``, giving
-  ``q^d' = φ' J q^d`` and ``q^d'' ≈ −φ'² q^d`` (the ``φ''`` term is neglected: small for a centre on a
-  smooth curve). With φ fixed this is the seed's constant-shape law.
+Theory: docs/theory/formation_control.md §4.
+
+* :class:`OrientedShape` — body-frame offsets (the cross with its current ``a, b``, or any rigid shape) turned to the
+  formation angle φ: fixed, or the direction of the centre velocity (the "platforms 1-2 along the level curve" of
+  Zhang & Leonard (2010), §V-A: at θ = 0 the velocity is the level-curve tangent). The desired vectors
+  ``q^d = g(φ) p^d`` move with φ; the feed-forward uses ``φ' = (r_c' × r_c'')/‖r_c'‖²``, giving ``q^d' = φ' J q^d`` and
+  ``q^d'' ≈ −φ'² q^d`` (the ``φ''`` term is neglected: small for a centre on a smooth curve). With φ fixed this is the
+  paper's constant-shape law.
 * :class:`RotatingShape` — :class:`~mobisense.formation.shape_control.RotatingShapeController` with its frame
   angle ψ and rate Ω as two extra ODE states.
 

@@ -1,4 +1,4 @@
-"""The closed-loop replay on a field (SPEC §2.6-2.8): platforms, formation control, centre motion, filter.
+"""The closed-loop replay on a field (docs/theory/replay.md §2): platforms, formation control, centre motion, filter.
 
 State of the ODE: platform positions and velocities ``(N, 2)`` each, plus the extra states of the shape
 task (``ψ, Ω`` of a rotating formation). Its right-hand side, at any time t:
@@ -64,7 +64,7 @@ class CenterTracking:
 
 @dataclass
 class CenterLevelCurve:
-    """The centre tracks a level curve (SPEC §2.7) with the field knowledge it is given."""
+    """The centre tracks a level curve (docs/theory/level_curve.md) with the field knowledge it is given."""
 
     controller: LevelCurveController
 
@@ -203,22 +203,22 @@ class _Loop:
         rc, q = sys.jacobi.to_jacobi(r)
         vc, dq = sys.jacobi.to_jacobi(v)
         z, g, H = self.knowledge.derivatives(rc, t)
-        a_c = sys.center(t, rc, vc, z, g, H)  # SPEC §2.7 (or reference tracking)
-        u, extra_rates = sys.shape.forces(t, q, dq, vc, a_c, extra)  # SPEC §2.6
+        a_c = sys.center(t, rc, vc, z, g, H)  # docs/theory/level_curve.md §4 (or reference tracking)
+        u, extra_rates = sys.shape.forces(t, q, dq, vc, a_c, extra)  # docs/theory/formation_control.md §2–§4
         return a_c, u, extra_rates, q
 
     def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
         """``y' = (v, f, extra')`` with ``f = [N a_c, u] Ψ^T`` limited."""
         _, v, _ = self.split(y)
         a_c, u, extra_rates, _ = self.commands(t, y)
-        forces = self.system.jacobi.forces_from_jacobi(self.N * a_c, u)  # SPEC §2.6, eq. 40 inverted
+        forces = self.system.jacobi.forces_from_jacobi(self.N * a_c, u)  # eq. formation_control.5
         out = np.concatenate([newton_rates(v, forces, self.system.limits), extra_rates])
         if not np.all(np.isfinite(out)):
             raise ReplayError(f"the closed loop became singular at t = {t:.6g} (centre at rest or ∇z = 0)")
         return out
 
     def measure(self, r: np.ndarray) -> np.ndarray:
-        """``p_i = z(r_i) + w(r_i) + n_i`` (SPEC §2.1)."""
+        """``p_i = z(r_i) + w(r_i) + n_i`` (docs/theory/cooperative.md, eq. cooperative.1)."""
         p = self.system.field.value(r) + self.sigma * self.rng.standard_normal(self.N)
         return p if self.w is None else p + self.w(r)
 
@@ -248,8 +248,9 @@ def _start_estimator(system: ReplaySystem, loop: _Loop, r: np.ndarray, rng: np.r
 def _adapt_shape(system: ReplaySystem, y: np.ndarray, k: int) -> None:
     """Step 3A every ``every`` samples: the ``(a, b)`` minimising ``J`` at the next sample.
 
-    The formation cannot jump, so the shape chosen now serves the next measurement, whose prior is
-    predicted as ``P_k(+) + M`` (``A ≈ I`` over one step along a level curve, SPEC §2.4).
+    The formation cannot jump, so the shape chosen now serves the next measurement, whose prior is predicted as
+    ``P_k(+) + M`` (``A ≈ I`` over one step along a level curve, docs/theory/steady_state.md §1;
+    docs/theory/replay.md §2.4).
     """
     from ...estimation.cooperative.formation_design import adaptive_shape_step
     from ...estimation.cooperative.information_model import cross_formation

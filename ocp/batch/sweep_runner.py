@@ -71,7 +71,7 @@ def run_sweep(
     workers : int, optional
         Local worker processes (default one per core).
     warm_start : bool
-        Seed each task from the nearest finished task of the same structure.
+        Warm-start each task from the nearest finished task of the same structure.
     time_limit : float, optional
         Wall-clock limit (s) of each Ipopt solve (sets ``solver.time_limit``).
     quiet : bool

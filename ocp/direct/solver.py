@@ -1,4 +1,4 @@
-"""Solve the mobile-sensor Kalman problem by direct collocation with ε-continuation (SPEC §1.3).
+"""Solve the mobile-sensor Kalman problem by direct collocation with ε-continuation (docs/theory/direct.md §5).
 
 ``solve_direct(problem)`` builds (or reuses) the transcription for the problem's structure and grid,
 starts from the ε → 0 limit (coasting sensors, Σ from the Riccati IVP), continues in ε with primal and

@@ -156,7 +156,7 @@ class CollocationMesh:
         }
 
     def _interval_kernel(self) -> ca.Function:
-        """Scaled collocation residuals of one interval and its end value (SPEC §1.4 system)."""
+        """Scaled collocation residuals of one interval and its end value (eq. indirect.13)."""
         s, c = self.system, self.scheme
         ny, d = s.ny, c.degree
         z0 = ca.SX.sym("z0", ny)

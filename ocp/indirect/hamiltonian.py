@@ -1,15 +1,15 @@
-"""The Pontryagin boundary-value problem of the mobile-sensor Kalman problem (SPEC §1.3–1.4), by AD.
+"""The Pontryagin boundary-value problem of the mobile-sensor Kalman problem (docs/theory/indirect.md §1–§2), by AD.
 
 Everything is derived with CasADi from the model's own functions (:class:`mobisense.ocp.model.SensorKalmanModel`):
 no adjoint is written by hand.
 
 Homotopy family (our choice, documented)
 ----------------------------------------
-SPEC §1.3 (the paper's eq. 23) divides the whole running cost by ε. Its ε → 0 limit is the classical
-Kalman filter (u ≡ 0) only when K = 0 and the terminal sensor state is free; otherwise it is the
-nonlinear problem min ∫(α/2|u|² + Tr KΣ) — no longer a Kalman filter to start from. The indirect method
-therefore divides only the control energy by ε, and moves fixed terminal states from the coasting end
-point to their targets:
+The direct method's family (docs/theory/direct.md, eq. direct.9; Hussein (2008), eq. 23) divides the whole running cost
+by ε. Its ε → 0 limit is the classical Kalman filter (u ≡ 0) only when K = 0 and the terminal sensor state is free;
+otherwise it is the nonlinear problem min ∫(α/2|u|² + Tr KΣ) — no longer a Kalman filter to start from. The indirect
+method therefore divides only the control energy by ε, and moves fixed terminal states from the coasting end point to
+their targets:
 
     J_ε = Tr[M Σ(tf)] + ∫ (α/(2ε) |u|² + Tr[K Σ]) dt,    x_k(tf) = (1 − ε) x_k^coast(tf) + ε x_k^target.
 
@@ -18,11 +18,11 @@ Kalman filter with coasting sensors for every problem; at ε = 1 it is problem I
 
 Continuation variable
 ---------------------
-We solve for the costate ``μ = ε λ`` of ``ε J_ε`` (λ the costate of J_ε, SPEC §1.4) with
+We solve for the costate ``μ = ε λ`` of ``ε J_ε`` (λ the costate of J_ε, docs/theory/indirect.md §1) with
 
-    H̃(x, u, μ) = α/2|u|² + ε Tr[K Σ] + μ'f(x, u) = ε H                         (SPEC §1.4 times ε)
-    u* = argmin_u H̃ = −(1/α) B_s' μ = −(ε/α) B_s' λ                              (SPEC §1.3)
-    x' = ∂H̃/∂μ = f(x, u*),   μ' = −∂H̃/∂x |_{u*}                                 (SPEC §1.4)
+    H̃(x, u, μ) = α/2|u|² + ε Tr[K Σ] + μ'f(x, u) = ε H           (docs/theory/indirect.md, eq. indirect.10)
+    u* = argmin_u H̃ = −(1/α) B_s' μ = −(ε/α) B_s' λ                (docs/theory/indirect.md, eq. indirect.10)
+    x' = ∂H̃/∂μ = f(x, u*),   μ' = −∂H̃/∂x |_{u*}                   (docs/theory/indirect.md, eq. indirect.11)
     x(t0) = x0,   μ_k(tf) = ε ∂Φ/∂x_k (free components),   x_k(tf) as above (fixed components).
 
 Every unknown stays bounded as ε → 0, and ε = 0 is solved exactly by the coasting states with μ ≡ 0
@@ -33,8 +33,8 @@ Newton step from u = 0, ``u* = −(∂²H̃/∂u²)⁻¹ ∂H̃/∂u|_{u=0}``, i
 Hessian does not depend on u. Control bounds (``u_max``) would turn u* into a non-smooth saturation and
 are not supported by the indirect method (use the direct method).
 
-Costate of the upper-triangle vector σ: for an off-diagonal σ_ij (standing for Σ_ij and Σ_ji)
-μ_σij = 2 ε Λ_ij, diagonal μ_σii = ε Λ_ii, with Λ the symmetric matrix costate of SPEC §1.4.
+Costate of the upper-triangle vector σ: for an off-diagonal σ_ij (standing for Σ_ij and Σ_ji) μ_σij = 2 ε Λ_ij, diagonal
+μ_σii = ε Λ_ii, with Λ the symmetric matrix costate of docs/theory/indirect.md §1.5 (eq. indirect.7).
 
 Unknowns are scaled, ``z = y / D`` with y = [x, μ] and D (2 nx,) chosen by the caller, so that the BVP
 solvers see O(1) numbers.
@@ -107,17 +107,18 @@ class HamiltonianSystem:
         P = ca.SX.sym("P", self.layout.size)
         b = self.layout.unpack(P)
 
-        # SPEC §1.4 times ε, energy-only homotopy: H̃ = α/2|u|² + ε Tr KΣ + μ'f, with running = [L, α/2|u|²]
+        # docs/theory/indirect.md, eq. indirect.10 (energy-only homotopy):
+        # H̃ = α/2|u|² + ε Tr KΣ + μ'f, with running = [L, α/2|u|²]
         L = m.running(x, u, P)
         H = L[1] + b["eps"] * (L[0] - L[1]) + ca.dot(mu, m.f(x, u, P))
         dHdu = ca.gradient(H, u)
         Huu = ca.hessian(H, u)[0]
         if ca.depends_on(Huu, ca.vertcat(u, x, mu)):
             raise NotImplementedError("the indirect method needs a Hamiltonian quadratic in u with constant ∂²H/∂u²")
-        # SPEC §1.3: u* = −(ε/α) B_s' λ, here as the exact Newton step from u = 0
+        # docs/theory/indirect.md, eq. indirect.10: u* = −(ε/α) B_s' λ, here as the exact Newton step from u = 0
         u_star = -ca.solve(Huu, ca.substitute(dHdu, u, ca.DM.zeros(nu)))
         x_dot = ca.substitute(ca.gradient(H, mu), u, u_star)  # = f(x, u*)
-        mu_dot = -ca.substitute(ca.gradient(H, x), u, u_star)  # SPEC §1.4: λ' = −∂H/∂x
+        mu_dot = -ca.substitute(ca.gradient(H, x), u, u_star)  # docs/theory/indirect.md, eq. indirect.3: λ' = −∂H/∂x
         self.control = ca.Function("control", [x, mu, P], [u_star], ["x", "mu", "P"], ["u"])
         self.hamiltonian = ca.Function(
             "hamiltonian", [x, mu, P], [ca.substitute(H, u, u_star)], ["x", "mu", "P"], ["H"]
@@ -167,7 +168,8 @@ class HamiltonianSystem:
             row = self._constraint_row[k]
             return g_T[row] - (1 - b["eps"]) * g_coast[row]
         dPhi = self.terminal_gradient(xb, P)
-        return (mub[k] - b["eps"] * dPhi[k]) / D[nx + k]  # SPEC §1.4: λ(tf) = ∂Φ/∂x(tf), times ε
+        # docs/theory/indirect.md, eq. indirect.6: λ(tf) = ∂Φ/∂x(tf), times ε
+        return (mub[k] - b["eps"] * dPhi[k]) / D[nx + k]
 
     def _coasting_end(self, P: ca.SX, b: dict) -> ca.SX:
         """State at tf of the coasting sensors (u ≡ 0): p0 + v0 (tf − t0), v0 (Σ entries: Σ0, unused)."""

@@ -1,4 +1,4 @@
-"""Residuals of the necessary conditions (SPEC §1.4) along any solution, direct or indirect.
+"""Residuals of the necessary conditions (docs/theory/indirect.md §5) along any solution, direct or indirect.
 
 For a solution at ε = 1 with states, controls and costates λ, evaluated where all three are known
 (the control times that are also state and costate times):
@@ -7,8 +7,8 @@ For a solution at ε = 1 with states, controls and costates λ, evaluated where 
     ``max_t |∂H/∂u| / max_t |λ_v|`` with ``H = L + λ'f``: stationarity of the Hamiltonian in u
     (at the optimum α u = −λ_v, so both terms have the size of λ_v).
 ``transversality``
-    ``max_k |λ_k(tf) − ∂Φ/∂x_k(tf)| / max_k |∂Φ/∂x_k|`` over the free terminal components (SPEC §1.4:
-    Λ(tf) = M, λ(tf) = 0), at the last costate time.
+    ``max_k |λ_k(tf) − ∂Φ/∂x_k(tf)| / max_k |∂Φ/∂x_k|`` over the free terminal components (docs/theory/indirect.md,
+    eq. indirect.6: Λ(tf) = M, λ(tf) = 0), at the last costate time.
 ``hamiltonian_variation``
     ``(max_t H − min_t H) / (J / T)``: H is constant along an extremal of a time-invariant problem;
     J/T (cost per unit time) is its natural size.
@@ -58,7 +58,8 @@ def optimality_residuals(solution: Solution) -> dict[str, Any]:
     times, i_u, i_t, i_c = common_times(solution)
     xs, us, lams = x[i_t], solution.u.reshape(len(solution.t_u), -1)[i_u], lam[i_c]
     m = len(times)
-    # SPEC §1.4 at ε = 1: H = L + λ'f (and H̃ = H, μ = λ in mobisense.ocp.indirect.hamiltonian)
+    # docs/theory/indirect.md, eq. indirect.14 at ε = 1: H = L + λ'f
+    # (and H̃ = H, μ = λ in mobisense.ocp.indirect.hamiltonian)
     dHdu = np.asarray(system.dHdu.map(m)(xs.T, us.T, lams.T, P)).T
     L = np.asarray(system.model.running.map(m)(xs.T, us.T, P))[0]
     f = np.asarray(system.model.f.map(m)(xs.T, us.T, P)).T

@@ -1,6 +1,8 @@
-"""Solve the mobile-sensor Kalman problem by the indirect method: the PMP boundary-value problem (SPEC §1.4).
+"""Solve the mobile-sensor Kalman problem by the indirect method, the PMP boundary-value problem.
 
-``solve_indirect(problem)`` does what the source paper does: start from the classical Kalman filter (ε = 0: sensors
+Theory: docs/theory/indirect.md.
+
+``solve_indirect(problem)`` does what Hussein (2008) does: start from the classical Kalman filter (ε = 0: sensors
 coast, Σ from the Riccati IVP, costates from the adjoint equations integrated backwards), continue in ε with the
 schedule of ``solver.homotopy`` (:func:`mobisense.ocp.homotopy.run_continuation`) and the BVP solver of ``solver.bvp``
 (:mod:`mobisense.ocp.indirect.bvp_solvers`), and return a :class:`~mobisense.ocp.solution.Solution` whose ``stats``

@@ -41,7 +41,7 @@ def test_shipped_scenario_writes_results_table_and_figures(shipped_run: tuple[in
     for row in summary["error_table"]:
         # both filters reduce the error spread below that of the raw cell mean (Table 1's message)
         assert row["std_constrained"] < row["std_noise"] and row["std_unconstrained"] < row["std_noise"]
-    # the seed's claim, reproduced for this scenario: lower error std with the constraint in every cell
+    # the paper's claim, reproduced for this scenario: lower error std with the constraint in every cell
     assert summary["cells_with_lower_constrained_std"] == list(range(9))
     # desired distances are ℓ ρ with ρ in (ε₃, ε₁/ε₂ + ε₃) = (20, 50) m and ℓ the links' shape ratios
     shortest, longest = _shape_ratio_range()

@@ -1,4 +1,7 @@
-"""The advection–diffusion fields (SPEC §4): derivatives by complex step, PDE residual, sign convention."""
+"""The advection–diffusion fields: derivatives by complex step, PDE residual, sign convention.
+
+Theory: docs/theory/distributed.md §1.
+"""
 
 from __future__ import annotations
 
@@ -44,10 +47,10 @@ def test_shapes_broadcast() -> None:
     assert field.value(r, np.arange(3.0)[:, None]).shape == (3, 4)
 
 
-@pytest.mark.parametrize("variant", ["exact", "seed"])
+@pytest.mark.parametrize("variant", ["exact", "paper"])
 def test_derivatives_match_complex_step(variant: str) -> None:
     rng = np.random.default_rng(1)
-    field = AdvectionDiffusionField(THETA, V, 0.05 if variant == "seed" else K, variant=variant)
+    field = AdvectionDiffusionField(THETA, V, 0.05 if variant == "paper" else K, variant=variant)
     r, t = sample_points(rng)
     dz_dt, grad = complex_step(field.value, r, t)
     _, hess = complex_step(field.gradient, r, t)
@@ -77,7 +80,7 @@ def test_exact_field_satisfies_the_pde_to_round_off() -> None:
 
 
 def test_sign_convention_against_symbolic_pde() -> None:
-    """CasADi differentiates the SPEC formula: ``x + v t`` solves ∂z/∂t = θΔz + v·∇z, ``x − v t`` does not."""
+    """CasADi differentiates eq. distributed.1: ``x + v t`` solves ∂z/∂t = θΔz + v·∇z, ``x − v t`` does not."""
     x, y, t = ca.SX.sym("x"), ca.SX.sym("y"), ca.SX.sym("t")
     residuals = {}
     for sign in (+1, -1):
@@ -98,10 +101,10 @@ def test_sign_convention_against_symbolic_pde() -> None:
     assert np.max(np.abs(minus)) > 1e-3
 
 
-def test_seed_field_residual_is_the_predicted_one() -> None:
-    """The seed's field misses the PDE by (k₂/k₁ − 1) v·∇z + 2θπ²(k₁² − k₂) z (module docstring)."""
+def test_paper_field_residual_is_the_predicted_one() -> None:
+    """The paper's field misses the PDE by (k₂/k₁ − 1) v·∇z + 2θπ²(k₁² − k₂) z (module docstring)."""
     k1, k2 = 0.05, 1e-4
-    field = AdvectionDiffusionField(THETA, V, k1, variant="seed", temporal_wavenumber=k2)
+    field = AdvectionDiffusionField(THETA, V, k1, variant="paper", temporal_wavenumber=k2)
     rng = np.random.default_rng(4)
     r, t = rng.uniform(-30, 30, size=(100, 2)), rng.uniform(0, 600, size=100)
     # the printed form: sin(π(k1 x + v1 k2 t)) e^{−θπ²k2 t} sin(π(k1 y + k2 v2 t)) e^{−θπ²k2 t}

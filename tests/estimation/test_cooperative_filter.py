@@ -1,4 +1,7 @@
-"""Cooperative Kalman filter (SPEC §2.2): engines, batching, consistency, coloured noise, Gramians."""
+"""Cooperative Kalman filter: engines, batching, consistency, coloured noise, Gramians.
+
+Theory: docs/theory/cooperative.md §2–§5.
+"""
 
 from __future__ import annotations
 
@@ -42,7 +45,7 @@ def test_taylor_model_is_exact_on_quadratic_fields() -> None:
     positions = np.random.default_rng(0).normal(size=(5, 2))
     C, D = taylor_matrices(positions)
     s = _truth(field, positions)
-    z = C @ s + D @ hessian_to_vec(field.H)  # SPEC eq. 6
+    z = C @ s + D @ hessian_to_vec(field.H)  # docs/theory/cooperative.md, eq. cooperative.4
     np.testing.assert_allclose(z, field.value(positions), atol=1e-13)
     np.testing.assert_allclose(vec_to_hessian(hessian_to_vec(field.H)), field.H, atol=0)
     # state equation (eq. 8-9, with the second-order value term) is exact: s_k = A s_{k-1} + h
@@ -216,7 +219,7 @@ def test_coloured_filters_are_consistent_for_markov_noise_and_agree_without_whit
     rng, field, positions, spatial, noise, P0, truth, x0 = _correlated_problem(K, B, seed=9)
     w = np.zeros((B, K, 4))
     w[:, 0] = rng.normal(size=(B, 4)) @ np.linalg.cholesky(spatial.W(positions[0])).T
-    for k in range(1, K):  # noise that *is* the first-order model of SPEC eqs. 10-12
+    for k in range(1, K):  # noise that *is* the first-order model of docs/theory/cooperative.md, eq. cooperative.11
         A_w, Q_w = spatial.markov(positions[k], positions[k - 1])
         w[:, k] = w[:, k - 1] @ A_w.T + rng.normal(size=(B, 4)) @ np.linalg.cholesky(Q_w + 1e-12 * np.eye(4)).T
     meas = field.value(positions) + w + 0.1 * rng.normal(size=(B, K, 4))

@@ -1,4 +1,7 @@
-"""Per-cell model, Hessian fit, projection stability, locality, benefit of the constraint (SPEC §4)."""
+"""Per-cell model, Hessian fit, projection stability, locality, benefit of the constraint.
+
+Theory: docs/theory/distributed.md §3–§6.
+"""
 
 from __future__ import annotations
 
@@ -18,7 +21,7 @@ from mobisense.estimation.distributed.filter import (
     fit_hessian,
 )
 from mobisense.estimation.distributed.fvm import far_points, laplacian_stencil, pde_constraint, project
-from mobisense.estimation.distributed.mesh import SensorMesh, grid_network, seed_network
+from mobisense.estimation.distributed.mesh import SensorMesh, grid_network, paper_network
 
 THETA, V = 2.0, np.array([0.5, 1.0])
 # v'Hv = 0 and H11 = H22: z below is linear in t at a fixed point and the square-cell FVM is exact
@@ -89,12 +92,12 @@ def test_hessian_fits() -> None:
 
 
 def test_projection_metric_decides_stability() -> None:
-    """Steady-state error map of a static cell with the projection fed back (seed eq. 28 uses x̃+).
+    """Steady-state error map of a static cell with the projection fed back (Zhang et al. (2023), eq. 28, uses x̃+).
 
-    The seed's Euclidean projection (M = I) mixes values and gradients of different units and makes
+    The paper's Euclidean projection (M = I) mixes values and gradients of different units and makes
     the loop unstable; the covariance-weighted one (M = P+) keeps it stable (our default).
     """
-    positions, cells = seed_network()
+    positions, cells = paper_network()
     offsets = positions[cells[0]] - positions[cells[0]].mean(axis=0)
     C, D = cell_measurement_matrices(offsets, offsets)
     A, _ = cell_transition(np.zeros(2), np.zeros((2, 2)))

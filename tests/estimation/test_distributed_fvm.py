@@ -1,4 +1,7 @@
-"""Sensor mesh topology and the finite-volume Laplacian / PDE constraint (SPEC §4, seed eqs. 20-27, 34)."""
+"""Sensor mesh topology and the finite-volume Laplacian / PDE constraint.
+
+Theory: docs/theory/distributed.md §2, §5; source: Zhang et al. (2023), eqs. 20-27, 34.
+"""
 
 from __future__ import annotations
 
@@ -6,7 +9,7 @@ import numpy as np
 import pytest
 
 from mobisense.estimation.distributed.fvm import far_points, laplacian_stencil, mesh_laplacian, pde_constraint, project
-from mobisense.estimation.distributed.mesh import MeshError, SensorMesh, grid_network, seed_network
+from mobisense.estimation.distributed.mesh import MeshError, SensorMesh, grid_network, paper_network
 
 H = np.array([[1.3, 0.4], [0.4, -0.7]])  # a generic symmetric Hessian (trace 0.6)
 G0 = np.array([0.2, -0.5])
@@ -41,8 +44,8 @@ def interior(mesh: SensorMesh) -> list[int]:
 
 
 # ---------------------------------------------------------------------------------------------- mesh
-def test_seed_network_topology() -> None:
-    positions, cells = seed_network()
+def test_paper_network_topology() -> None:
+    positions, cells = paper_network()
     mesh = SensorMesh(cells, positions)
     # Euler: V − E + F = 2 with 12 vertices and 9 + 1 faces gives 20 edges; 4·3 + 5·4 = 2·12 + 8
     assert len(mesh.edge_pairs) == 20 and len(mesh.boundary_edges) == 8
@@ -116,7 +119,7 @@ def test_boundary_edges_on_squares() -> None:
 
 
 def test_boundary_edges_are_inconsistent_on_an_isolated_equilateral_triangle() -> None:
-    """The seed's boundary rule (midpoint value = mean of the vertex values) doubles Δz here, at any size.
+    """The paper's boundary rule (midpoint value = mean of the vertex values) doubles Δz here, at any size.
 
     For z = ½|r|² about the centroid (Δz = 2): vertex mean of an edge R²/2 = 1/(6)·side², distance to the
     midpoint = inradius side/(2√3); three edges give 3·side·(side²/6)/(side/(2√3))/(√3 side²/4) = 4.
@@ -130,7 +133,7 @@ def test_boundary_edges_are_inconsistent_on_an_isolated_equilateral_triangle() -
 
 def test_exact_for_linear_fields_on_any_cell() -> None:
     rng = np.random.default_rng(5)
-    positions, cells = seed_network(30.0, 24.0)
+    positions, cells = paper_network(30.0, 24.0)
     positions = positions + rng.uniform(-4, 4, size=positions.shape)  # irregular, still a valid mesh
     mesh = SensorMesh(cells, positions)
     lap = laplacian_of(mesh, positions, lambda p: p @ np.array([0.7, -1.9]) + 4.0)
@@ -138,7 +141,7 @@ def test_exact_for_linear_fields_on_any_cell() -> None:
 
 
 def test_converges_on_smoothly_distorted_cells() -> None:
-    """Irregular quadrilaterals (a smooth warp of a grid): the error of interior cells falls as h²."""
+    """Irregular quadrilaterals (a smooth warp of a grid): the error of interior cells falls at about h²."""
 
     def warp(p: np.ndarray) -> np.ndarray:
         x, y = p[:, 0], p[:, 1]

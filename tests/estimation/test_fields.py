@@ -1,4 +1,4 @@
-"""Fields (SPEC §2.8) and the spatially correlated noise model (SPEC §2.1-2.2)."""
+"""Fields (docs/theory/cooperative.md §6) and the spatially correlated noise model (docs/theory/cooperative.md §3)."""
 
 from __future__ import annotations
 

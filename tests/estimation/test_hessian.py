@@ -1,4 +1,4 @@
-"""Hessian estimation (SPEC §2.5): one-step filter, least squares, level-curve curvature."""
+"""Hessian estimation (docs/theory/hessian.md): one-step filter, least squares, level-curve curvature."""
 
 from __future__ import annotations
 
@@ -24,7 +24,8 @@ def test_one_step_filter_matches_the_printed_form_and_its_cost() -> None:
     filtered, cov = one_step_filter(z_hat, G, p, Sigma)
     inv = np.linalg.inv
     I = np.eye(4)
-    printed = inv(I + G @ inv(Sigma)) @ z_hat + inv(I + Sigma @ inv(G)) @ p  # SPEC eq. 33 as printed
+    # Zhang & Leonard (2010), eq. 33 as printed (eq. hessian.2, left-hand form)
+    printed = inv(I + G @ inv(Sigma)) @ z_hat + inv(I + Sigma @ inv(G)) @ p
     np.testing.assert_allclose(filtered, printed, atol=1e-12)
     np.testing.assert_allclose(cov, inv(I + G @ inv(Sigma)) @ G, atol=1e-12)  # Prop. 4.1
     # it minimises ½[(z − ẑ)' G⁻¹ (z − ẑ) + (p − z)' Σ⁻¹ (p − z)], whose Hessian inverse is the covariance
@@ -60,7 +61,7 @@ def test_least_squares_refuses_the_cross_whose_values_do_not_determine_h12() -> 
 
 
 def _aligned_cross(field, center: np.ndarray, a: float) -> np.ndarray:  # noqa: ANN001
-    """The seed's layout: platforms 1-2 along the level curve through the centre (Fig. 2)."""
+    """The paper's layout: platforms 1-2 along the level curve through the centre (Fig. 2)."""
     g = field.gradient(center)
     return cross_formation(a, a, center=center, orientation=np.arctan2(-g[0], g[1]))
 
@@ -105,7 +106,7 @@ def test_curvature_hessian_keeps_the_unobservable_part_of_its_initial_guess() ->
     """The documented limitation: one snapshot of a cross cannot correct the body-frame H12 of Hᵖ.
 
     The map Hᵖ ↦ Ĥ of one pass has Jacobian eigenvalue 1 along that direction (measured here), so the
-    estimate relies on Hᵖ from the previous step, as the seed prescribes.
+    estimate relies on Hᵖ from the previous step, as the paper prescribes.
     """
     center = np.array([0.4, -0.2])
     positions = _aligned_cross(QUADRATIC, center, 0.1)

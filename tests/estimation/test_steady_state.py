@@ -1,4 +1,4 @@
-"""Steady state and formation design (SPEC §2.4) and the ``mobisense steady-state`` command."""
+"""Steady state and formation design (docs/theory/steady_state.md) and the ``mobisense steady-state`` command."""
 
 from __future__ import annotations
 

@@ -1,4 +1,7 @@
-"""Directional range-sensor ring, triangulation, activity test and switching Kalman filter (seed 001 §7)."""
+"""Directional range-sensor ring, triangulation, activity test and switching Kalman filter.
+
+Theory: docs/theory/leader_follower.md §6–§7; source: Karasalo & Hu (2010), §7.
+"""
 
 from __future__ import annotations
 

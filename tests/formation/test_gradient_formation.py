@@ -1,4 +1,7 @@
-"""Gradient-based adaptive formation (seed eqs. 38-44): bounds, stable spacing term, convergence, SUSD."""
+"""Gradient-based adaptive formation: bounds, stable spacing term, convergence, SUSD.
+
+Theory: docs/theory/distributed.md §7; source: Zhang et al. (2023), eqs. 38-44.
+"""
 
 from __future__ import annotations
 
@@ -6,7 +9,7 @@ import numpy as np
 import pytest
 
 from mobisense.core.config import ConfigError, parse_config
-from mobisense.estimation.distributed.mesh import SensorMesh, seed_network
+from mobisense.estimation.distributed.mesh import SensorMesh, paper_network
 from mobisense.formation.distributed.gradient_formation import (
     FormationOptions,
     GradientFormation,
@@ -57,7 +60,7 @@ def test_desired_spacing_stays_inside_its_bounds_and_shrinks_with_the_gradient()
 
 def test_spacing_term_is_minus_the_gradient_of_the_potential() -> None:
     rng = np.random.default_rng(1)
-    positions, cells = seed_network()
+    positions, cells = paper_network()
     positions = positions + rng.uniform(-3, 3, positions.shape)
     links = SensorMesh(cells, positions).cell_pairs
     desired = rng.uniform(15, 40, len(links))
@@ -88,7 +91,7 @@ def test_spacing_term_decreases_the_potential() -> None:
 
 
 def test_weighted_mean_of_equal_gradients_is_that_gradient() -> None:
-    positions, cells = seed_network()
+    positions, cells = paper_network()
     mesh = SensorMesh(cells, positions)
     grads = np.tile(SLOPE, (mesh.n_cells, 1))
     v = weighted_gradients(positions, mesh.centres(positions), grads, mesh.membership)
@@ -97,7 +100,7 @@ def test_weighted_mean_of_equal_gradients_is_that_gradient() -> None:
     weights = (
         mesh.membership / np.sum((positions[:, None] - mesh.centres(positions)[None]) ** 2, axis=-1)
     ).sum(1)
-    assert np.allclose(summed, weights[:, None] * SLOPE, rtol=1e-14)  # the seed's literal eq. 38
+    assert np.allclose(summed, weights[:, None] * SLOPE, rtol=1e-14)  # the paper's literal eq. 38
     w, w_perp = headings(v)
     assert np.allclose(w, SLOPE / np.linalg.norm(SLOPE)) and np.allclose(np.sum(w * w_perp, axis=1), 0.0)
 
@@ -121,9 +124,9 @@ def test_distances_converge_to_the_desired_ones_on_a_constant_gradient_field() -
     assert np.allclose(drift, 0.5 * w + 0.2 * np.array([-w[1], w[0]]), atol=1e-12)
 
 
-def test_keep_shape_scales_the_seed_mesh() -> None:
+def test_keep_shape_scales_the_paper_mesh() -> None:
     """With keep_shape the 9-cell mesh converges to its initial shape scaled to mean edge ρ."""
-    positions, cells = seed_network(30.0, 24.0)
+    positions, cells = paper_network(30.0, 24.0)
     mesh = SensorMesh(cells, positions)
     formation = GradientFormation(mesh, FormationOptions(a=1.0, c=0.2, **EPS), positions)
     final, history = run(formation, positions, 400, lambda centres: np.tile(SLOPE, (len(centres), 1)))

@@ -1,4 +1,7 @@
-"""Jacobi transform (SPEC §2.6): orthonormal construction, the seed's N = 4 vectors, exact energy split."""
+"""Jacobi transform: orthonormal construction, the paper's N = 4 vectors, exact energy split.
+
+Theory: docs/theory/formation_control.md §1; source: Zhang & Leonard (2010), §V-A, eq. 38.
+"""
 
 from __future__ import annotations
 
@@ -20,11 +23,11 @@ def test_directions_are_orthonormal_and_orthogonal_to_ones(N):
     assert np.allclose(Psi[:, 0], 1.0 / N, rtol=0, atol=ROUND_OFF)
     assert np.abs(Q.T @ Q - np.eye(N - 1)).max() < ROUND_OFF
     assert np.abs(Q.sum(axis=0)).max() < ROUND_OFF
-    # Ψ⁻¹ = [1, Q]' (SPEC §2.6), compared with a numerical inverse
+    # Ψ⁻¹ = [1, Q]' (docs/theory/formation_control.md §1.1), compared with a numerical inverse
     assert np.abs(np.linalg.inv(Psi) - np.column_stack([np.ones(N), Q]).T).max() < ROUND_OFF
 
 
-def test_four_platforms_reproduce_seed_eq_38():
+def test_four_platforms_reproduce_the_papers_eq_38():
     r = np.random.default_rng(0).normal(size=(4, 2))
     _, q = JacobiTransform(4).to_jacobi(r)
     expected = [(r[1] - r[0]) / np.sqrt(2), (r[2] - r[3]) / np.sqrt(2), 0.5 * (r[3] + r[2] - r[1] - r[0])]
@@ -72,7 +75,7 @@ def test_custom_tree_and_invalid_tree():
 
 
 def test_shape_forces_leave_the_centre_untouched():
-    """Newton's equations with shape-only forces: the centre moves on r_c0 + v_c0 t (SPEC §2.6)."""
+    """Newton's equations with shape-only forces: the centre moves on r_c0 + v_c0 t (eq. formation_control.4)."""
     N, rng = 5, np.random.default_rng(3)
     jt = JacobiTransform(N)
     control = FixedShapeController(stiffness=9.0, damping=6.0)

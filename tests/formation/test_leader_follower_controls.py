@@ -1,4 +1,7 @@
-"""Leader–follower kinematics and Controls 1–3 against their analytic closed-loop behaviour (SPEC §3, seed 001)."""
+"""Leader–follower kinematics and Controls 1–3 against their analytic closed-loop behaviour.
+
+Theory: docs/theory/leader_follower.md §1–§4; source: Karasalo & Hu (2010).
+"""
 
 from __future__ import annotations
 
@@ -34,7 +37,7 @@ from mobisense.formation.leader_follower.unicycle import (
     unicycle_rates,
 )
 
-# the seed's §8.2 set-up: v1 = 10, ω1 = π/3, k = 1, d0 = 1, β0 = π/7, R2 at (−0.97, −0.70, π/10)
+# the paper's §8.2 set-up (Karasalo & Hu (2010)): v1 = 10, ω1 = π/3, k = 1, d0 = 1, β0 = π/7, R2 at (−0.97, −0.70, π/10)
 LEADER = LeaderMotion(np.zeros(3), 10.0, math.pi / 3)
 FOLLOWER = np.array([[-0.97, -0.70, math.pi / 10]])
 RAMP = BearingRampReference(0.5, math.pi / 7, 0.001, 0.1, 45.0)  # eq. 55 read as d0' = 0.1 cos(45 β0)
@@ -155,7 +158,7 @@ def test_control2_d_hat_decays_and_bearing_error_is_monotone():
     beta_err = np.abs(result["beta"].values - result["beta0"].values)
     # strictly decreasing: each 0.01 s step removes ≥ k (d0/d) |sin β̂| Δt, far above the 1e-9 integration noise
     assert np.all(np.diff(beta_err[beta_err > 1e-6]) < 0)
-    # and Control 1 does not have that property on the same case (the seed's Fig. 11)
+    # and Control 1 does not have that property on the same case (the paper's Fig. 11)
     c1 = simulate(_problem("control1")).sel(follower=2)
     assert np.max(np.diff(np.abs(c1["beta"].values - c1["beta0"].values))) > 1e-5  # ≫ 1e-9 integration noise
 
@@ -207,7 +210,7 @@ def test_ramp_reference_matches_numerical_integration_of_its_rates():
         # rtol 1e-12 on O(1) values: 1e-10 is a 100× margin
         np.testing.assert_allclose([ref.distance, ref.bearing], sol.sol(t), rtol=0, atol=1e-10)
         np.testing.assert_allclose(ref.distance_rate, 0.1 * math.cos(45 * ref.bearing), rtol=1e-14)
-    # the seed's Fig. 19 window: d0 rises from 0.5 to a maximum ≈ 0.556 at t = 5 s and returns
+    # the paper's Fig. 19 window: d0 rises from 0.5 to a maximum ≈ 0.556 at t = 5 s and returns
     d0 = [RAMP.at(float(t)).distance for t in np.linspace(0, 10, 101)]
     assert 0.55 < max(d0) < 0.56 and abs(d0[-1] - 0.5) < 2e-3
 

@@ -1,4 +1,7 @@
-"""Path geometry of the dynamic formation parameters (seed 001 §8.3, Fig. 13) and the deviation metric (eq. 54)."""
+"""Path geometry of the dynamic formation parameters and the deviation metric.
+
+Theory: docs/theory/leader_follower.md §4.3, §5; source: Karasalo & Hu (2010), §8.3, Fig. 13 and eq. 54.
+"""
 
 from __future__ import annotations
 

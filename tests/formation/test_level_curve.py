@@ -1,4 +1,7 @@
-"""Level-curve tracking (SPEC §2.7): θ and z dynamics, level functions, Lyapunov decrease on true fields."""
+"""Level-curve tracking: θ and z dynamics, level functions, Lyapunov decrease on true fields.
+
+Theory: docs/theory/level_curve.md.
+"""
 
 from __future__ import annotations
 
@@ -34,7 +37,8 @@ FIELDS = {
 def test_heading_and_level_dynamics_match_finite_differences(name):
     """θ' = α(κ1 cos θ + κ2 sin θ − u_c) and z' = −α‖∇z‖ sin θ along an arbitrary smooth path.
 
-    This fixes the sign of κ2 (+x1'∇²z y1/‖∇z‖ with SPEC's frames); the printed minus fails by O(0.1).
+    This fixes the sign of κ2 (+x1'∇²z y1/‖∇z‖ with the frames of docs/theory/level_curve.md §2); the printed minus
+    fails by O(0.1).
     """
     field, path = FIELDS[name]
     t = np.linspace(0.0, 2.0, 20001)
@@ -83,7 +87,7 @@ def test_reciprocal_level_needs_a_positive_level():
 
 
 def fly_particle(controller, field, r0, v0, T):
-    """The centre as a unit-mass particle r'' = a_c with exact field knowledge (SPEC §2.7)."""
+    """The centre as a unit-mass particle r'' = a_c with exact field knowledge (docs/theory/level_curve.md §1)."""
 
     def rhs(t, y):
         r, v = y[:2], y[2:]

@@ -97,7 +97,8 @@ def test_measurement_variances_use_the_noise_model(solution):
     problem = solution.problem
     positions = np.random.default_rng(0).normal(size=(7, 1, 2)) * 5
     r = measurement_variances(problem, positions)
-    expected = 5.0 * np.sum((positions[:, 0] - [0.0, 0.0]) ** 2, axis=-1) + 3.0  # β ρ² + γ (SPEC §1.5)
+    # β ρ² + γ (docs/theory/ocp.md, eq. ocp.4)
+    expected = 5.0 * np.sum((positions[:, 0] - [0.0, 0.0]) ** 2, axis=-1) + 3.0
     assert r.shape == (7, 1) and np.allclose(r[:, 0], expected, rtol=1e-14, atol=0)
 
 

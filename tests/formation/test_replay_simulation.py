@@ -1,4 +1,4 @@
-"""Closed-loop field replays (SPEC §2.6-2.8): Lyapunov decrease (true field), level bound (estimated)."""
+"""Closed-loop field replays (docs/theory/replay.md §2): Lyapunov decrease (true field), level bound (estimated)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,7 @@
-"""Shape controllers (SPEC §2.6): errors follow the analytic solution of the linear second-order system."""
+"""Shape controllers: errors follow the analytic solution of the linear second-order system.
+
+Theory: docs/theory/formation_control.md §2–§3.
+"""
 
 from __future__ import annotations
 

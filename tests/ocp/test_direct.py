@@ -1,4 +1,7 @@
-"""Direct collocation against analytic results and independent computations (SPEC §1)."""
+"""Direct collocation against analytic results and independent computations.
+
+Theory: docs/theory/ocp.md, docs/theory/direct.md.
+"""
 
 from __future__ import annotations
 

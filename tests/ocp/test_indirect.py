@@ -1,5 +1,5 @@
 """The indirect method (PMP boundary-value problem, ε-continuation) against closed forms, independent
-integrations and the direct method (SPEC §1.3–1.4)."""
+integrations and the direct method (docs/theory/indirect.md §1–§2)."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from mobisense.ocp.simulate import integrate
 DEFAULT_OPTIMUM = 15.8477720354
 #: optimum of coupled_two_sensor() (direct Radau d = 3, K = 400, Ipopt tol 1e-12; K = 200 gives 51.7194934952)
 COUPLED_OPTIMUM = 51.7194935074
-#: the paper's example (SPEC §1.5)
+#: the paper's example (docs/theory/ocp.md §4)
 a, Q, M, beta, gamma, alpha = -0.5, 1.0, 20.0, 5.0, 3.0, 0.004
 
 
@@ -54,7 +54,7 @@ def default_seeded(default_direct):
 
 # ---------------------------------------------------------------------- the Hamiltonian system
 def _decoupled_every_sensor_sees_every_state() -> Problem:
-    """SPEC §1.2: diagonal A, B = I, Q diagonal, two sensors each measuring both states."""
+    """docs/theory/ocp.md §3.1 (eq. ocp.13): diagonal A, B = I, Q diagonal, two sensors each measuring both states."""
     data, _, _ = two_scalar_processes()
     for sensor in data["sensors"]:
         sensor.pop("measures")
@@ -62,9 +62,10 @@ def _decoupled_every_sensor_sees_every_state() -> Problem:
 
 
 def test_ad_costate_equations_equal_the_papers_closed_forms():
-    # SPEC §1.4, decoupled case: Λ_j' = −2Λ_j(a_j − Σ_j Σ_i 1/r_j^i) − K_j, λ_p' = −Σ_j Λ_j Σ_j² ∂r/∂p / r²,
-    # λ_v' = −λ_p, and Σ_j' = 2a_jΣ_j − Σ_j² Σ_i 1/r_j^i + Q_j (SPEC §1.2), with diagonal Σ and Λ staying
-    # diagonal. Same arithmetic, different order: equal to rounding (1e-12 relative).
+    # docs/theory/indirect.md §1.3, decoupled case: Λ_j' = −2Λ_j(a_j − Σ_j Σ_i 1/r_j^i) − K_j,
+    # λ_p' = −Σ_j Λ_j Σ_j² ∂r/∂p / r², λ_v' = −λ_p, and Σ_j' = 2a_jΣ_j − Σ_j² Σ_i 1/r_j^i + Q_j (docs/theory/ocp.md,
+    # eq. ocp.13), with diagonal Σ and Λ staying diagonal. Same arithmetic, different order: equal to rounding
+    # (1e-12 relative).
     problem = _decoupled_every_sensor_sees_every_state()
     system = hamiltonian_system(Structure.of(problem))
     rng = np.random.default_rng(3)
@@ -182,7 +183,7 @@ def test_scipy_refinement_from_the_direct_solution_agrees(default_seeded, defaul
 
 
 def _check_boundary_conditions(bvp, tolerance: float) -> None:
-    """x(t0) = x0 and transversality Λ(tf) = M, λ(tf) = 0 (SPEC §1.4), relative to each unknown's size."""
+    """x(t0) = x0 and transversality Λ(tf) = M, λ(tf) = 0 (eq. indirect.6), relative to each unknown's size."""
     x, mu = bvp.y[:5], bvp.y[5:]
     x0 = np.array([200.0, 10.0, 10.0, 0.0, -2.0])
     assert (np.abs(x[:, 0] - x0) / np.abs(x).max(axis=1)).max() < tolerance
@@ -193,12 +194,12 @@ def _check_boundary_conditions(bvp, tolerance: float) -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("which", ["continuation (collocation)", "direct-seeded (scipy)"])
 def test_bvp_solution_satisfies_the_odes(which, default_indirect, default_seeded, default_problem):
-    # Independent of the solvers: (1) re-simulate the Riccati + sensor ODE with solve_ivp (rtol 1e-12) under
-    # the BVP's control u(t) = −λ_v(t)/α; (2) integrate the paper's closed-form adjoint (SPEC §1.4, n = N = 1,
-    # no CasADi) backwards from Λ(tf) = M, λ(tf) = 0 along the BVP's states. Expected size of the
-    # differences: scipy — its residual tolerance 1e-8 (measured 2e-11 states, 4e-9 costates); collocation —
-    # its stage error O(h^4) between nodes, h = 0.1 (measured 6e-7 states, 5e-6 costates, relative).
-    # Boundary conditions hold to the solver tolerance: Newton 1e-10 (scaled) / solve_bvp bc_tol = tol = 1e-8.
+    # Independent of the solvers: (1) re-simulate the Riccati + sensor ODE with solve_ivp (rtol 1e-12) under the BVP's
+    # control u(t) = −λ_v(t)/α; (2) integrate the paper's closed-form adjoint (docs/theory/indirect.md §1.3, n = N = 1,
+    # no CasADi) backwards from Λ(tf) = M, λ(tf) = 0 along the BVP's states. Expected size of the differences: scipy —
+    # its residual tolerance 1e-8 (measured 2e-11 states, 4e-9 costates); collocation — its stage error O(h^4) between
+    # nodes, h = 0.1 (measured 6e-7 states, 5e-6 costates, relative). Boundary conditions hold to the solver tolerance:
+    # Newton 1e-10 (scaled) / solve_bvp bc_tol = tol = 1e-8.
     collocation = which.startswith("continuation")
     bvp = default_indirect[1] if collocation else default_seeded
     state_tol, costate_tol, bc_tol = (2e-6, 2e-5, 1e-10) if collocation else (1e-8, 1e-8, 1e-8)
