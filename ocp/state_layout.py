@@ -3,7 +3,7 @@
 ``σ`` is the upper triangle of the error covariance Σ, row by row (n(n+1)/2 entries), ``p_i`` (L) and
 ``v_i`` (L/T) the planar position and velocity of sensor i; the controls are ``u = [u_1, …, u_N]``
 (L/T²). The costate of x has the same layout; for the off-diagonal entries σ_ij, which stand for both
-Σ_ij and Σ_ji, the costate is twice the matrix costate: ``μ_σij = 2 Λ_ij`` (docs/theory/indirect.md §2).
+Σ_ij and Σ_ji, the costate is twice the matrix costate: ``μ_σij = 2 Λ_ij`` (docs/theory/indirect.md §1.5).
 Every method (direct, indirect), the solution and the replay read and write x through
 :class:`StateLayout`, never by slicing it by hand.
 """
