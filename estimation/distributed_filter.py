@@ -54,9 +54,10 @@ from estimation.distributed_fvm import far_points, laplacian_stencil, pde_constr
 from estimation.distributed_mesh import CellEdge, SensorMesh
 from estimation.information_model import transition_matrix, vec_to_hessian
 from estimation.kalman import predict, update
-from ocp.config import NonNegativeFloat, PositiveFloat, StrictModel
+from ocp.config import NonNegativeFloat, PositiveFloat, StrictModel, Vector2
 
 __all__ = [
+    "AssumedPde",
     "ValueGradientStd",
     "HessianOptions",
     "FilterOptions",
@@ -93,6 +94,18 @@ class HessianOptions(StrictModel):
     error_std: NonNegativeFloat = Field(0.0, description="std of each vec(H) entry error (field unit / L²)")
 
 
+class AssumedPde(StrictModel):
+    """The PDE the filter's constraint assumes, when it differs from the field's (a model-mismatch study).
+
+    The seed's §8 test field is not a solution of ``∂z/∂t = θΔz + v·∇z`` with its own θ and v, but it is
+    an exact solution with ``θ' = θ k₂/k₁²`` and ``v' = (k₂/k₁) v`` (0.08 m²/s and 0.002 v for k₁ = 0.05,
+    k₂ = 1e-4); ``assumed_pde`` lets the filter use either.
+    """
+
+    diffusivity: PositiveFloat = Field(description="θ assumed by the constraint (L²/s)")
+    velocity: Vector2 = Field(description="v assumed by the constraint (L/s)")
+
+
 class FilterOptions(StrictModel):
     """Noise model of the per-cell filter (seed Assumption 5.1) and its initialisation."""
 
@@ -102,6 +115,9 @@ class FilterOptions(StrictModel):
     projection: Literal["covariance", "euclidean"] = Field(
         "covariance",
         description="metric of the constraint projection: P (minimum variance) or I (seed eq. 34)",
+    )
+    assumed_pde: AssumedPde | None = Field(
+        None, description="θ, v of the constraint if not the field's (default: the field's own)"
     )
 
 
