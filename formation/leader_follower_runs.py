@@ -21,6 +21,7 @@ from formation.leader_follower_references import (
     ConstantReference,
     PathReference,
     ReferenceSchedule,
+    SteppedReference,
 )
 from formation.leader_follower_scenario import (
     ConstantReferenceConfig,
@@ -29,6 +30,7 @@ from formation.leader_follower_scenario import (
     ReferenceConfig,
     RingSensingConfig,
     SensingConfig,
+    SteppedReferenceConfig,
 )
 from formation.leader_follower_sensing import RingSpec
 from formation.leader_follower_simulation import IntegrationSettings, LeaderFollowerProblem, LeaderMotion, simulate
@@ -53,6 +55,9 @@ def build_reference(config: ReferenceConfig, measured_distance: dict[str, float]
         beta_end = schedule.at(duration).bearing
         warn_near_singular(min(math.cos(config.bearing), math.cos(beta_end)), "min cos beta0(t)")
         return schedule
+    if isinstance(config, SteppedReferenceConfig):
+        warn_near_singular(min(math.cos(b) for b in config.bearing), "min cos beta0")
+        return SteppedReference(config.switch_times, config.distances(), config.bearing)
     if math.cos(config.max_bearing) < WARN_COS:
         warn_near_singular(math.cos(config.max_bearing), "cos max_bearing")
     return PathReference(config.max_area, config.max_distance, config.max_bearing)
