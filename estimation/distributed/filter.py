@@ -53,13 +53,14 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from ...core.config import NonNegativeFloat, PositiveFloat, StrictModel
+from ...core.config import NonNegativeFloat, PositiveFloat, StrictModel, Vector2
 from ..cooperative.information_model import transition_matrix, vec_to_hessian
 from ..kalman import predict, update
 from .fvm import far_points, laplacian_stencil, pde_constraint, project
 from .mesh import CellEdge, SensorMesh
 
 __all__ = [
+    "AssumedPde",
     "ValueGradientStd",
     "HessianOptions",
     "FilterOptions",
@@ -99,6 +100,18 @@ class HessianOptions(StrictModel):
     error_std: NonNegativeFloat = Field(0.0, description="std of each vec(H) entry error (field unit / L²)")
 
 
+class AssumedPde(StrictModel):
+    """The PDE the filter's constraint assumes, when it differs from the field's (a model-mismatch study).
+
+    The seed's §8 test field is not a solution of ``∂z/∂t = θΔz + v·∇z`` with its own θ and v, but it is
+    an exact solution with ``θ' = θ k₂/k₁²`` and ``v' = (k₂/k₁) v`` (0.08 m²/s and 0.002 v for k₁ = 0.05,
+    k₂ = 1e-4); ``assumed_pde`` lets the filter use either.
+    """
+
+    diffusivity: PositiveFloat = Field(description="θ assumed by the constraint (L²/s)")
+    velocity: Vector2 = Field(description="v assumed by the constraint (L/s)")
+
+
 class FilterOptions(StrictModel):
     """Noise model of the per-cell filter (Zhang et al. (2023), Assumption 5.1) and its initialisation."""
 
@@ -108,6 +121,9 @@ class FilterOptions(StrictModel):
     projection: Literal["covariance", "euclidean"] = Field(
         "covariance",
         description="metric of the constraint projection: P (minimum variance) or I (Zhang et al. (2023), eq. 34)",
+    )
+    assumed_pde: AssumedPde | None = Field(
+        None, description="θ, v of the constraint if not the field's (default: the field's own)"
     )
 
 

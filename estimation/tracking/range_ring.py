@@ -214,6 +214,32 @@ class RangeSensorRing:
             reading = reading + self.noise_std * rng.standard_normal(reading.shape)
         return np.where(self.visible(pose, target), np.maximum(reading, 0.0), np.nan)
 
+    def fix_bearing_std(self, pose: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """Bearing standard deviation (rad) of one triangulated fix by each pair, noise-free geometry.
+
+        For a target at ``target`` seen from ``pose``: the component of each active pair's triangulation
+        covariance (:func:`triangulation_covariance`) across the line of sight from the robot centre, divided
+        by the centre distance. NaN for pairs that are not active (a sensor does not see the target).
+
+        Returns
+        -------
+        ndarray, shape (P,)
+        """
+        pose = np.asarray(pose, dtype=float)
+        target = np.asarray(target, dtype=float)
+        pairs = self.pair_measurements(pose, self.read(pose, target))
+        los = target - pose[:2]
+        distance = float(np.hypot(*los))
+        across = np.array([-los[1], los[0]]) / distance
+        out = np.full(self.n_pairs, np.nan)
+        if np.any(pairs.active):
+            sensors = self.sensor_positions(pose)
+            q_prev, q = self.pairs[pairs.active, 0], self.pairs[pairs.active, 1]
+            targets = np.broadcast_to(target, (len(q), 2))
+            cov = triangulation_covariance(sensors[q], sensors[q_prev], targets, self.noise_std)
+            out[pairs.active] = np.sqrt(np.einsum("i,pij,j->p", across, cov, across)) / distance
+        return out
+
     def pair_measurements(self, pose: np.ndarray, readings: np.ndarray) -> PairMeasurements:
         """Activity test and triangulation for every pair (Algorithm 7.1, steps 2–4).
 

@@ -170,7 +170,11 @@ def simulate(scenario: DistributedScenario, seed: int | None = None, progress: b
     mesh = scenario.network.mesh()
     dt, K = scenario.time.step, scenario.time.n_steps
     sigma = scenario.noise_std
-    pde = PdeModel(field.diffusivity, field.velocity, dt)
+    assumed = scenario.filter.assumed_pde
+    if assumed is None:
+        pde = PdeModel(field.diffusivity, field.velocity, dt)
+    else:  # model-mismatch study: the constraint uses other θ, v than the field (FilterOptions.assumed_pde)
+        pde = PdeModel(assumed.diffusivity, np.asarray(assumed.velocity, dtype=float), dt)
     network = DistributedFilter(mesh, scenario.filter, sigma, pde)
     formation = GradientFormation(
         mesh, scenario.formation, np.asarray(scenario.network.positions, dtype=float)

@@ -110,7 +110,19 @@ class ClosedLoopEstimator:
         window: int = 10,
         smoothing: float = 1.0,
         warmup: int = 0,
+        relative_error: float = 0.0,
+        estimator: str = "kalman",
+        fit_window: int = 6,
     ) -> None:
+        if estimator not in ("kalman", "window_fit"):
+            raise ValueError(f"estimator: expected 'kalman' or 'window_fit', got {estimator!r}")
+        self.estimator = estimator
+        self._fit = WindowHessian(fit_window) if estimator == "window_fit" else None
+        self._fit_state: np.ndarray | None = None
+        self._fit_hessian: np.ndarray | None = None
+        if relative_error < 0:
+            raise ValueError(f"relative_error: expected ρ >= 0, got {relative_error}")
+        self.relative_error = float(relative_error)
         if not 0 < smoothing <= 1 or warmup < 0:
             raise ValueError(f"smoothing: expected 0 < β <= 1, warmup >= 0; got {smoothing}, {warmup}")
         self.base_noise, self.spatial_noise, self.field = noise, spatial_noise, field
@@ -131,11 +143,47 @@ class ClosedLoopEstimator:
     def _true_hessian(self, positions: np.ndarray, *_: np.ndarray) -> np.ndarray:
         return self.field.hessian(formation_center(positions))
 
-    def _noise_at(self, positions: np.ndarray) -> CooperativeNoise:
-        if self.spatial_noise is None:
+    def hessian_error(self, hessian: np.ndarray | None = None, gradient: np.ndarray | None = None) -> np.ndarray:
+        """Hessian-error covariance ``U_k`` (4, 4): ``σ3² I``, plus a relative error model when ρ > 0.
+
+        With ``relative_error`` ρ > 0:
+
+            U_k = σ3² I + (F⊗F) diag(ρ² vec(Ĥ_F)²) (F⊗F)',   Ĥ_F = F' Ĥ F,
+
+        in the level-curve frame ``F = [x1, y1]`` of the gradient estimate (x1 tangent, y1 = ∇ẑ/‖∇ẑ‖): each
+        entry of the Frenet-frame Hessian is uncertain in proportion to its size (ρ = 1: 100 %). Along the
+        level curve ``Ĥ_F,11 = −‖∇ẑ‖ κ̂``, so the error of the platforms 1-2 term follows the curvature
+        (seed §III-E, Fig. 5: "U_k determined by the accuracy of the Hessian estimation algorithm").
+        """
+        U0 = self.base_noise.hessian_error
+        if self.relative_error == 0.0 or self.filter is None:
+            return U0
+        H = self.filter.hessian if hessian is None else np.asarray(hessian, float)
+        g = self.state[1:] if gradient is None else np.asarray(gradient, float)
+        norm = float(np.linalg.norm(g))
+        if not norm > 0 or not np.all(np.isfinite(H)):
+            return U0
+        y1 = g / norm
+        F = np.column_stack([[y1[1], -y1[0]], y1])  # columns x1 (tangent), y1 (normal): lab = F @ Frenet
+        H_F = F.T @ H @ F
+        vec_F = H_F.T.reshape(4)  # [H11, H21, H12, H22] (column-major, as hessian_to_vec)
+        T = np.kron(F, F)  # vec(F X F') = (F ⊗ F) vec(X)
+        return U0 + T @ np.diag((self.relative_error * vec_F) ** 2) @ T.T
+
+    def design_noise(self) -> CooperativeNoise:
+        """``M, R = σ2² I, U_k`` for the shape design of step 3A (no spatial-noise term)."""
+        if self.relative_error == 0.0:
             return self.base_noise
+        return CooperativeNoise(self.base_noise.process, self.base_noise.measurement, self.hessian_error())
+
+    def _noise_at(self, positions: np.ndarray, hessian: np.ndarray | None = None) -> CooperativeNoise:
+        U = self.hessian_error(hessian) if self.filter is not None else self.base_noise.hessian_error
+        if self.spatial_noise is None:
+            if self.relative_error == 0.0:
+                return self.base_noise
+            return CooperativeNoise(self.base_noise.process, self.base_noise.measurement, U)
         R = self.base_noise.measurement_matrix(len(positions)) + self.spatial_noise.W(positions)
-        return CooperativeNoise(self.base_noise.process, R, self.base_noise.hessian_error)
+        return CooperativeNoise(self.base_noise.process, R, U)
 
     def start(
         self, positions: np.ndarray, measurements: np.ndarray, state: np.ndarray, covariance: np.ndarray,
@@ -165,12 +213,31 @@ class ClosedLoopEstimator:
             if np.all(np.isfinite(raw)):  # else degenerate geometry this step: keep the previous estimate
                 H = filt.hessian + self.smoothing * (raw - filt.hessian)  # exponential smoothing, factor β
         self.samples += 1
-        filt.noise = self._noise_at(positions)
+        filt.noise = self._noise_at(positions, H)
         filt.update(measurements, H)
+        if self._fit is not None:
+            self._window_fit(positions, measurements)
+
+    def _window_fit(self, positions: np.ndarray, measurements: np.ndarray) -> None:
+        """No-filter estimate: joint quadratic fit to the last samples, moved to the current centre (eq. 9)."""
+        self._fit.history.append((np.asarray(positions, float), np.asarray(measurements, float)))
+        while len(self._fit.history) > self._fit.window:
+            self._fit.history.popleft()
+        points = np.concatenate([p for p, _ in self._fit.history])
+        values = np.concatenate([m for _, m in self._fit.history])
+        try:
+            fitted, hessian = least_squares_hessian(points, values)
+        except ValueError:  # not yet six well-spread points: use the filter meanwhile
+            return
+        shift = formation_center(positions) - points.mean(axis=0)
+        self._fit_state = transition_matrix(shift) @ fitted + hessian_drift(hessian, shift)
+        self._fit_hessian = hessian
 
     @property
     def state(self) -> np.ndarray:
-        """Posterior ``s_k(+) = [z, ∂z/∂x, ∂z/∂y]`` at the last centre, shape (3,)."""
+        """Posterior ``s_k(+) = [z, ∂z/∂x, ∂z/∂y]`` at the last centre, shape (3,) (the fit for window_fit)."""
+        if self._fit_state is not None:
+            return self._fit_state
         return self.filter.state[..., 0]
 
     @property
@@ -180,7 +247,9 @@ class ClosedLoopEstimator:
 
     @property
     def hessian(self) -> np.ndarray:
-        """``Ĥ_{c,k}``, shape (2, 2)."""
+        """``Ĥ_{c,k}``, shape (2, 2) (the fit's for window_fit)."""
+        if self._fit_hessian is not None:
+            return self._fit_hessian
         return self.filter.hessian
 
     @property

@@ -137,7 +137,8 @@ def build_system(scenario: FieldReplayScenario, scenario_path: Path) -> ReplaySy
     field_ = scenario.field.build()
     f = scenario.filter
     estimator = ClosedLoopEstimator(
-        noise.to_noise(), spatial, f.hessian, field_, f.window, f.hessian_smoothing, f.hessian_warmup
+        noise.to_noise(), spatial, f.hessian, field_, f.window, f.hessian_smoothing, f.hessian_warmup,
+        f.hessian_relative_error, f.estimator, f.fit_window,
     )
     limits = PlatformLimits(scenario.platforms.max_force, scenario.platforms.max_speed)
     true_derivatives = isinstance(motion, LevelCurveMotion) and motion.derivatives == "true_field"
@@ -268,8 +269,8 @@ def _adapt_shape(system: ReplaySystem, y: np.ndarray, k: int) -> None:
         for (lo, hi), c in zip(adaptive.bounds.pairs(), current, strict=True)
     )  # trust region around the current shape
     design = adaptive_shape_step(
-        P, system.estimator.base_noise, box, system.shape.angle(vc), adaptive.equal_sides
-    )
+        P, system.estimator.design_noise(), box, system.shape.angle(vc), adaptive.equal_sides
+    )  # U_k of the current Hessian estimate (constant σ3² I unless filter.hessian_relative_error > 0)
     system.shape.set_offsets(cross_formation(*design.x))
 
 

@@ -18,7 +18,9 @@ Solvers:
 ``scipy``
     ``scipy.integrate.solve_bvp`` (4th-order Lobatto IIIA collocation with residual control and mesh
     refinement) with the vectorised CasADi right-hand side and exact Jacobians ``fun_jac``/``bc_jac``.
-    Its continuation is natural-parameter (one ε at a time), which cannot pass a fold.
+    Its continuation is natural-parameter (one ε at a time, each solve seeded by the last — the source
+    paper's method), which cannot pass a fold: on the default problem it stops at ε ≈ 0.006, or, with the
+    paper's δ = 0.05, fails at the first step (see notebooks/01).
 """
 
 from __future__ import annotations
@@ -262,8 +264,22 @@ class ScipyBVP(BVPSolver):
         )
 
     def follow(self, start: BVPSolution, eps: float) -> BVPSolution:
-        """Natural-parameter step: ``solve_bvp`` at ε from ``start`` on its mesh."""
-        return self.solve(eps, start)
+        """Natural-parameter step, as the source paper does: ``solve_bvp`` at ε from ``start`` on its mesh.
+
+        The guess keeps ``start``'s states and PMP costates λ = μ/ε (the paper's unknowns), i.e. the scaled
+        costates are multiplied by ε/ε_start. (From ε_start = 0, where λ is not carried by μ ≡ 0, the caller
+        passes the Kalman guess to :meth:`solve` instead, see :func:`ocp.indirect.indirect_continuation`.)
+        """
+        if start.eps <= 0.0:
+            return self.solve(eps, start)
+        nx, ratio, evaluate = self.system.structure.nx, eps / start.eps, start.evaluate
+
+        def guess(tt: np.ndarray) -> np.ndarray:
+            y = np.array(evaluate(tt), dtype=float)
+            y[nx:] *= ratio
+            return y
+
+        return self.solve(eps, guess, mesh=start.t)
 
     def _costs(self, sol: Any, P: np.ndarray) -> tuple[float, float, float]:
         """Φ(x(tf)) and Gauss–Legendre quadrature of L, α/2|u|² on the cubic solution."""

@@ -284,7 +284,12 @@ def indirect_continuation(
     state = {"current": start}
 
     def attempt(eps: float) -> bool:
-        result = bvp.follow(state["current"], eps)
+        current = state["current"]
+        if current.eps == 0.0 and bvp.name == "scipy":
+            # the paper's first step: seeded by the Kalman filter and its adjoint costates (μ = ε λ_K)
+            result = bvp.solve(eps, guess_at(eps))
+        else:
+            result = bvp.follow(current, eps)
         status = "converged" if result.success else result.message
         step = HomotopyStep(eps, result.cost_eps, result.iterations, status, result.time_s, result.success)
         steps.append(step)
