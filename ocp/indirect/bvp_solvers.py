@@ -18,9 +18,9 @@ Solvers:
 ``scipy``
     ``scipy.integrate.solve_bvp`` (4th-order Lobatto IIIA collocation with residual control and mesh
     refinement) with the vectorised CasADi right-hand side and exact Jacobians ``fun_jac``/``bc_jac``.
-    Its continuation is natural-parameter (one ε at a time, each solve seeded by the last — the source
-    paper's method), which cannot pass a fold: on the default problem it stops at ε ≈ 0.006, or, with the
-    paper's δ = 0.05, fails at the first step (see notebooks/01).
+    Its continuation is natural-parameter (one ε at a time, each solve seeded by the last — Hussein's (2008)
+    method), which cannot pass a fold: on the default problem it stops at ε ≈ 0.006, or, with the paper's
+    δ = 0.05, fails at its first step (docs/theory/indirect.md §3.4).
 """
 
 from __future__ import annotations
@@ -104,6 +104,10 @@ class BVPSolver(ABC):
     """
 
     name: str = ""
+    #: ``follow`` is a natural-parameter step (solve at the new ε from the last solution). From ε = 0, where
+    #: μ ≡ 0 carries no costate information, the continuation then seeds the first step with the Kalman guess
+    #: at that ε (states and adjoint costates), as Hussein (2008, §IV) does.
+    natural_parameter: bool = False
 
     def __init__(self, problem: Problem, values: dict[str, Any], scales: np.ndarray) -> None:
         self.problem = problem
@@ -264,11 +268,11 @@ class ScipyBVP(BVPSolver):
         )
 
     def follow(self, start: BVPSolution, eps: float) -> BVPSolution:
-        """Natural-parameter step, as the source paper does: ``solve_bvp`` at ε from ``start`` on its mesh.
+        """Natural-parameter step, as Hussein (2008, §IV) does: ``solve_bvp`` at ε from ``start`` on its mesh.
 
         The guess keeps ``start``'s states and PMP costates λ = μ/ε (the paper's unknowns), i.e. the scaled
-        costates are multiplied by ε/ε_start. (From ε_start = 0, where λ is not carried by μ ≡ 0, the caller
-        passes the Kalman guess to :meth:`solve` instead, see :func:`ocp.indirect.indirect_continuation`.)
+        costates are multiplied by ε/ε_start. (From ε_start = 0, where μ ≡ 0 carries no λ, the continuation
+        passes the Kalman guess to :meth:`solve` instead: :attr:`BVPSolver.natural_parameter`.)
         """
         if start.eps <= 0.0:
             return self.solve(eps, start)
