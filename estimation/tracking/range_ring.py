@@ -215,15 +215,23 @@ class RangeSensorRing:
         return np.where(self.visible(pose, target), np.maximum(reading, 0.0), np.nan)
 
     def fix_bearing_std(self, pose: np.ndarray, target: np.ndarray) -> np.ndarray:
-        """Bearing standard deviation (rad) of one triangulated fix by each pair, noise-free geometry.
+        """Bearing standard deviation of one triangulated fix by each pair (docs/theory/leader_follower.md §6).
 
-        For a target at ``target`` seen from ``pose``: the component of each active pair's triangulation
-        covariance (:func:`triangulation_covariance`) across the line of sight from the robot centre, divided
-        by the centre distance. NaN for pairs that are not active (a sensor does not see the target).
+        For a target at ``target`` seen from ``pose``, noise-free geometry: the component of each active pair's
+        triangulation covariance (eq. leader_follower.19) across the line of sight from the robot centre,
+        divided by the centre distance (eq. leader_follower.23).
+
+        Parameters
+        ----------
+        pose : ndarray, shape (3,)
+            Robot pose ``(x, y, φ)`` (m, m, rad).
+        target : ndarray, shape (2,)
+            Target centre (m).
 
         Returns
         -------
         ndarray, shape (P,)
+            Bearing std (rad) per pair; NaN for pairs that are not active (a sensor does not see the target).
         """
         pose = np.asarray(pose, dtype=float)
         target = np.asarray(target, dtype=float)

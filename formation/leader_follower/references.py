@@ -20,6 +20,7 @@ from __future__ import annotations
 import bisect
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -157,7 +158,9 @@ class BearingRampReference(ReferenceSchedule):
 
 @register_reference
 class SteppedReference(ReferenceSchedule):
-    """Piecewise-constant formation parameters switched at given instants (seed §8.1, Fig. 9).
+    """Piecewise-constant formation parameters switched at given instants (docs/theory/leader_follower.md §4.4).
+
+    Source: Karasalo & Hu (2010), §8.1, Fig. 9.
 
     Parameters
     ----------
@@ -177,7 +180,7 @@ class SteppedReference(ReferenceSchedule):
     kind = "steps"
     provides_rates = False
 
-    def __init__(self, switch_times, distances, bearings) -> None:
+    def __init__(self, switch_times: Sequence[float], distances: Sequence[float], bearings: Sequence[float]) -> None:
         self.switch_times = [float(t) for t in switch_times]
         self.distances = [float(d) for d in distances]
         self.bearings = [float(b) for b in bearings]

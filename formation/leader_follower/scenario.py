@@ -115,7 +115,9 @@ class RampReferenceConfig(StrictModel):
 
 
 class SteppedReferenceConfig(StrictModel):
-    """Piecewise-constant ``d0`` (m), ``β0`` (rad) switched at ``switch_times`` (s) (seed §8.1, Fig. 9).
+    """Piecewise-constant ``d0`` (m), ``β0`` (rad) switched at ``switch_times`` (s).
+
+    Theory: docs/theory/leader_follower.md §4.4; source: Karasalo & Hu (2010), §8.1, Fig. 9.
 
     ``bearing`` lists ``m + 1`` values for ``m`` switch times; ``distance`` is one value (kept throughout) or
     ``m + 1`` values. Example (Fig. 9): ``{kind: steps, distance: 0.12, bearing: [0, 0.5236, 0],

@@ -1,5 +1,8 @@
-"""Seed 001 (Karasalo & Hu) §8 results re-examined (issue 17): β0 = 0 vs π/6, the β0-switching run (Fig. 9)
-and Control 3 with the simulation text's d0(0) = 1."""
+"""Karasalo & Hu (2010), §8 results re-examined: β0 = 0 vs π/6, the β0-switching run (Fig. 9) and Control 3
+with the simulation text's d0(0) = 1.
+
+Theory: docs/theory/leader_follower.md §4.4, §10.
+"""
 
 from __future__ import annotations
 
@@ -55,6 +58,7 @@ def test_stepped_reference_validation(edit, message):
         _scenario("khepera_switching", edit)
 
 
+@pytest.mark.slow  # closed-loop ring simulations of 60–90 s
 def test_fig9_exact_run_decays_exactly_on_each_piece():
     # Theorem 1 on each constant piece: after a switch at t_s, (x_e, y_e)(t) = (x_e, y_e)(t_s) e^{−k(t − t_s)}
     scenario = _scenario("khepera_switching", lambda d: d.update(runs=[{"name": "exact", "sensing": {"mode": "exact"}}],
@@ -69,8 +73,9 @@ def test_fig9_exact_run_decays_exactly_on_each_piece():
         np.testing.assert_allclose(e, e[0] * np.exp(-(t[m] - t[m][0])), atol=1e-8)
 
 
-def test_fig9_ring_reproduces_the_seed_claims():
-    # The seed's Fig. 9 text: R2 responds quickly to each switch, no static error in β2, R1 in view throughout,
+@pytest.mark.slow  # closed-loop ring simulations of 60–90 s
+def test_fig9_ring_reproduces_the_paper_claims():
+    # The paper's Fig. 9 text: R2 responds quickly to each switch, no static error in β2, R1 in view throughout,
     # Δd2 fluctuates around a small static error after ≈ 20 s.
     result = simulate_scenario(_scenario("khepera_switching"))
     t = result["time"].values
@@ -89,6 +94,7 @@ def test_fig9_ring_reproduces_the_seed_claims():
         assert abs(dd.mean()) < 0.005 and np.abs(dd).max() < 0.02  # small static error (≈ −1…−3 mm), bounded
 
 
+@pytest.mark.slow  # closed-loop ring simulations of 60–90 s
 def test_fig9_no_static_bearing_error_across_seeds():
     # β0 = 0 plateau [70, 90] s: the window mean fluctuates (20 seeds: −0.015 ± 0.041 rad, seed 7 −0.091);
     # over 6 seeds the average must be within 3 standard errors (3 · 0.041/√6 = 0.050 rad) of zero (seeds 0–5: −0.008).
@@ -133,7 +139,7 @@ def test_front_pair_triangulates_the_bearing_worse(name, ratio_low, ratio_high):
 
 def test_narrow_cones_put_pi6_at_the_edge_of_p2():
     # 70° cones on the Khepera II layout: p2 sees the leader only for β in ≈ [19.5°, 36°] (π/6 near the top edge,
-    # the seed's "edge of the field of view for s2 and s3"), p3 for |β| ≤ 14.5°
+    # the paper's "edge of the field of view for s2 and s3"), p3 for |β| ≤ 14.5°
     scenario = load_config(PROBLEMS / "leader_follower_khepera2.yaml", LeaderFollowerScenario)
     sensing = {name: s for name, _, _, s in scenario.resolved_runs()}["fov70_beta0_pi6"]
     ring = build_ring(sensing).ring
@@ -146,8 +152,9 @@ def test_narrow_cones_put_pi6_at_the_edge_of_p2():
     assert 13.0 <= p3.max() <= 16.0 and -16.0 <= p3.min() <= -13.0
 
 
+@pytest.mark.slow  # closed-loop ring simulations of 60–90 s
 def test_narrow_cones_reverse_the_ordering():
-    # seed 7: with 100° cones β0 = 0 and π/6 are alike (0.048, 0.046 rad); with 70° cones β0 = 0 is unchanged
+    # noise seed 7: with 100° cones β0 = 0 and π/6 are alike (0.048, 0.046 rad); with 70° cones β0 = 0 is unchanged
     # and π/6 is the hard case — the follower loses its leader for 41 % of the samples after 15 s (6 seeds:
     # 2–3 of 6 lose it)
     result = simulate_scenario(load_config(PROBLEMS / "leader_follower_khepera2.yaml", LeaderFollowerScenario))
