@@ -67,21 +67,32 @@ class WindowHessian:
     window: int
     history: deque = field(default_factory=deque)
 
-    def __call__(
-        self, positions: np.ndarray, measurements: np.ndarray, state_prior: np.ndarray,
-        covariance_prior: np.ndarray, previous_hessian: np.ndarray,
-    ) -> np.ndarray:  # fmt: skip
-        """``Ĥ_{c,k}`` (2, 2); the previous estimate until the window determines the fit (rank 6)."""
+    def fit(self, positions: np.ndarray, measurements: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """Add one sample and fit; ``([z, ∇z] at the current centre (3,), Ĥ (2, 2))``, or None.
+
+        The fit is about the centroid of the window's points and moved to the current formation centre by the
+        quadratic model (eq. 9 of Zhang & Leonard (2010); docs/theory/cooperative.md §1.3). None while the
+        window does not yet determine the six unknowns (rank 6).
+        """
         self.history.append((np.asarray(positions, float), np.asarray(measurements, float)))
         while len(self.history) > self.window:
             self.history.popleft()
         points = np.concatenate([p for p, _ in self.history])
         values = np.concatenate([m for _, m in self.history])
         try:
-            _, hessian = least_squares_hessian(points, values)
+            fitted, hessian = least_squares_hessian(points, values)
         except ValueError:  # not yet six well-spread points
-            return previous_hessian
-        return hessian
+            return None
+        shift = formation_center(positions) - points.mean(axis=0)
+        return transition_matrix(shift) @ fitted + hessian_drift(hessian, shift), hessian
+
+    def __call__(
+        self, positions: np.ndarray, measurements: np.ndarray, state_prior: np.ndarray,
+        covariance_prior: np.ndarray, previous_hessian: np.ndarray,
+    ) -> np.ndarray:  # fmt: skip
+        """``Ĥ_{c,k}`` (2, 2); the previous estimate until the window determines the fit (rank 6)."""
+        fitted = self.fit(positions, measurements)
+        return previous_hessian if fitted is None else fitted[1]
 
 
 class ClosedLoopEstimator:
@@ -99,6 +110,15 @@ class ClosedLoopEstimator:
         The true field (only for ``hessian="true_field"``).
     window : int
         Samples of the ``window`` source.
+    smoothing, warmup : float, int
+        Exponential smoothing factor β of ``Ĥ`` and samples before the source is first used.
+    relative_error : float
+        ρ of the Hessian-error model :meth:`hessian_error` (0: constant ``U = σ3² I``).
+    estimator : {"kalman", "window_fit"}
+        What the controllers see: the filter, or (no filter) the joint quadratic fit to the last ``fit_window``
+        samples moved to the current centre (docs/theory/replay.md §2.6). The filter runs in both cases.
+    fit_window : int
+        Samples of the ``window_fit`` estimator.
     """
 
     def __init__(
@@ -117,9 +137,8 @@ class ClosedLoopEstimator:
         if estimator not in ("kalman", "window_fit"):
             raise ValueError(f"estimator: expected 'kalman' or 'window_fit', got {estimator!r}")
         self.estimator = estimator
-        self._fit = WindowHessian(fit_window) if estimator == "window_fit" else None
-        self._fit_state: np.ndarray | None = None
-        self._fit_hessian: np.ndarray | None = None
+        self.window_fit = WindowHessian(fit_window) if estimator == "window_fit" else None
+        self.fitted: tuple[np.ndarray, np.ndarray] | None = None  # the last window fit (state, Hessian)
         if relative_error < 0:
             raise ValueError(f"relative_error: expected ρ >= 0, got {relative_error}")
         self.relative_error = float(relative_error)
@@ -146,17 +165,24 @@ class ClosedLoopEstimator:
     def hessian_error(self, hessian: np.ndarray | None = None, gradient: np.ndarray | None = None) -> np.ndarray:
         """Hessian-error covariance ``U_k`` (4, 4): ``σ3² I``, plus a relative error model when ρ > 0.
 
-        With ``relative_error`` ρ > 0:
+        With ``relative_error`` ρ > 0 (docs/theory/replay.md, eq. replay.10)::
 
             U_k = σ3² I + (F⊗F) diag(ρ² vec(Ĥ_F)²) (F⊗F)',   Ĥ_F = F' Ĥ F,
 
         in the level-curve frame ``F = [x1, y1]`` of the gradient estimate (x1 tangent, y1 = ∇ẑ/‖∇ẑ‖): each
         entry of the Frenet-frame Hessian is uncertain in proportion to its size (ρ = 1: 100 %). Along the
         level curve ``Ĥ_F,11 = −‖∇ẑ‖ κ̂``, so the error of the platforms 1-2 term follows the curvature
-        (seed §III-E, Fig. 5: "U_k determined by the accuracy of the Hessian estimation algorithm").
+        (Zhang & Leonard (2010), §III-E: "U_k determined by the accuracy of the Hessian estimation algorithm").
+
+        Parameters
+        ----------
+        hessian : ndarray, shape (2, 2), optional
+            ``Ĥ`` (default: the filter's).
+        gradient : ndarray, shape (2,), optional
+            ``∇ẑ`` that fixes the frame (default: the current estimate's).
         """
         U0 = self.base_noise.hessian_error
-        if self.relative_error == 0.0 or self.filter is None:
+        if self.relative_error == 0.0 or (self.filter is None and (hessian is None or gradient is None)):
             return U0
         H = self.filter.hessian if hessian is None else np.asarray(hessian, float)
         g = self.state[1:] if gradient is None else np.asarray(gradient, float)
@@ -171,7 +197,7 @@ class ClosedLoopEstimator:
         return U0 + T @ np.diag((self.relative_error * vec_F) ** 2) @ T.T
 
     def design_noise(self) -> CooperativeNoise:
-        """``M, R = σ2² I, U_k`` for the shape design of step 3A (no spatial-noise term)."""
+        """``M, R = σ2² I, U_k`` for the shape design of step 3A (no spatial-noise term; docs/theory/replay.md §2.5)."""
         if self.relative_error == 0.0:
             return self.base_noise
         return CooperativeNoise(self.base_noise.process, self.base_noise.measurement, self.hessian_error())
@@ -215,29 +241,14 @@ class ClosedLoopEstimator:
         self.samples += 1
         filt.noise = self._noise_at(positions, H)
         filt.update(measurements, H)
-        if self._fit is not None:
-            self._window_fit(positions, measurements)
-
-    def _window_fit(self, positions: np.ndarray, measurements: np.ndarray) -> None:
-        """No-filter estimate: joint quadratic fit to the last samples, moved to the current centre (eq. 9)."""
-        self._fit.history.append((np.asarray(positions, float), np.asarray(measurements, float)))
-        while len(self._fit.history) > self._fit.window:
-            self._fit.history.popleft()
-        points = np.concatenate([p for p, _ in self._fit.history])
-        values = np.concatenate([m for _, m in self._fit.history])
-        try:
-            fitted, hessian = least_squares_hessian(points, values)
-        except ValueError:  # not yet six well-spread points: use the filter meanwhile
-            return
-        shift = formation_center(positions) - points.mean(axis=0)
-        self._fit_state = transition_matrix(shift) @ fitted + hessian_drift(hessian, shift)
-        self._fit_hessian = hessian
+        if self.window_fit is not None:  # until the window determines the fit the filter's estimate is used
+            self.fitted = self.window_fit.fit(positions, measurements) or self.fitted
 
     @property
     def state(self) -> np.ndarray:
         """Posterior ``s_k(+) = [z, ∂z/∂x, ∂z/∂y]`` at the last centre, shape (3,) (the fit for window_fit)."""
-        if self._fit_state is not None:
-            return self._fit_state
+        if self.fitted is not None:
+            return self.fitted[0]
         return self.filter.state[..., 0]
 
     @property
@@ -248,8 +259,8 @@ class ClosedLoopEstimator:
     @property
     def hessian(self) -> np.ndarray:
         """``Ĥ_{c,k}``, shape (2, 2) (the fit's for window_fit)."""
-        if self._fit_hessian is not None:
-            return self._fit_hessian
+        if self.fitted is not None:
+            return self.fitted[1]
         return self.filter.hessian
 
     @property

@@ -276,7 +276,8 @@ class FilterConfig(StrictModel):
     estimator: Literal["kalman", "window_fit"] = Field(
         "kalman",
         description="what the controllers see: the cooperative Kalman filter, or (no filter, for comparison, "
-        "seed Fig. 3) a joint quadratic least-squares fit to the last fit_window samples, shifted to the centre",
+        "Zhang & Leonard (2010), Fig. 3) a joint quadratic least-squares fit to the last fit_window samples, "
+        "moved to the centre",
     )
     fit_window: int = Field(6, ge=3, le=1000, description="samples of the window_fit estimator")
     hessian_relative_error: NonNegativeFloat = Field(

@@ -155,6 +155,9 @@ class ReplayRecord:
     z_true, z_est : (K+1,) ; grad_true, grad_est : (K+1, 2) ; hess_true, hess_est : (K+1, 2, 2)
     covariance : (K+1, 3, 3) posterior P ; a_desired, b_desired : (K+1,) ; q_desired : (K+1, N−1, 2)
     extra : (K+1, n_extra) ; reference : (K+1, 2) or None
+    spatial_noise : callable or None
+        The sample function ``w(points (M, 2)) -> (M,)`` of the spatial noise drawn for this run (None without
+        spatial noise), e.g. to draw the noisy level curve ``z + w = C``.
     """
 
     t: list = field(default_factory=list)
@@ -173,6 +176,7 @@ class ReplayRecord:
     q_desired: list = field(default_factory=list)
     extra: list = field(default_factory=list)
     reference: Any = None
+    spatial_noise: Any = None
     meta: dict[str, Any] = field(default_factory=dict)
 
     def arrays(self) -> dict[str, np.ndarray]:
@@ -324,7 +328,7 @@ def simulate(system: ReplaySystem, seed: int | None = None, progress: bool = Fal
     times = np.linspace(0.0, s.duration, steps + 1)
     y = _initial_state(system, rng)
     _start_estimator(system, loop, loop.split(y)[0], rng)
-    rec = ReplayRecord()
+    rec = ReplayRecord(spatial_noise=loop.w)
     scale = max(1.0, float(np.abs(y[: 2 * loop.N]).max()))
     atol = np.concatenate([np.full(4 * loop.N, 1e-9 * scale), np.full(len(y) - 4 * loop.N, 1e-9)])
     started = time.perf_counter()
