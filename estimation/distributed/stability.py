@@ -13,22 +13,24 @@ constrained chains as follows, for a truth that satisfies the model (noise-free 
 
 with ``c_js = θΔt b_s/A`` the weight of the neighbour's centre value in ``ĝ`` and ``M = I`` (eq. 34) or ``P+``.
 The spectral radius of this ``6n × 6n`` map equals the measured growth rate of a simulated error to 4
-digits (tests). Eq. 34's metric is not invariant under a change of the length unit; the covariance metric is.
+digits (tests). Eq. 34's metric is not invariant under a change of the length unit; the covariance metric is
+(docs/theory/distributed.md §10.2). :func:`translating_mesh_errors` runs the filter on a mesh translating
+through a known field, for measuring the constraint's benefit (docs/theory/distributed.md §10.1).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from scipy.linalg import solve_discrete_are
 
 from ..cooperative.information_model import vec_to_hessian
-from .filter import FilterOptions, cell_measurement_matrices, cell_transition
+from .filter import DistributedFilter, FilterOptions, PdeModel, cell_measurement_matrices, cell_transition
 from .fvm import far_points, laplacian_stencil, pde_constraint
 from .mesh import SensorMesh
 
-__all__ = ["steady_gain", "error_map", "spectral_radius", "rescale_length_unit"]
+__all__ = ["steady_gain", "error_map", "spectral_radius", "rescale_length_unit", "translating_mesh_errors"]
 
 
 def steady_gain(A: np.ndarray, C: np.ndarray, W: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -137,3 +139,55 @@ def rescale_length_unit(options: FilterOptions, factor: float) -> FilterOptions:
     o.hessian.ridge /= factor**4
     o.hessian.error_std *= factor**2
     return o
+
+
+def translating_mesh_errors(
+    positions: np.ndarray,
+    cells: Sequence[Sequence[int]],
+    options: FilterOptions,
+    measurement_std: float,
+    pde: PdeModel,
+    truth: Callable[[np.ndarray, float], np.ndarray],
+    velocity: Sequence[float],
+    steps: int,
+    seed: int = 0,
+) -> dict[str, np.ndarray]:
+    """Errors of both chains of the distributed filter on a mesh translating through a known field.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (N, 2)
+        Sensor positions at step 0 (L); at step k they are ``positions + k Δt velocity``.
+    cells : sequence of sequences of int
+    options : FilterOptions
+    measurement_std : float
+        σ of the white measurement noise (field unit).
+    pde : PdeModel
+        The constraint's θ, v and Δt.
+    truth : callable
+        ``truth(points (M, 2), t) -> (M,)``, the field.
+    velocity : sequence of float
+        Mesh velocity (L/T).
+    steps : int
+    seed : int
+
+    Returns
+    -------
+    dict
+        ``"constrained"`` and ``"unconstrained"``: value errors at the cell centres, shape (steps, n_cells).
+    """
+    positions = np.asarray(positions, float)
+    shift = pde.time_step * np.asarray(velocity, float)
+    mesh = SensorMesh(cells, positions)
+    rng = np.random.default_rng(seed)
+    network = DistributedFilter(mesh, options, measurement_std, pde)
+    noise = lambda: measurement_std * rng.standard_normal(len(positions))  # noqa: E731
+    network.start(positions, truth(positions, 0.0) + noise())
+    errors: dict[str, list[np.ndarray]] = {"constrained": [], "unconstrained": []}
+    for k in range(1, steps + 1):
+        p, t = positions + shift * k, k * pde.time_step
+        network.step(p, truth(p, t) + noise())
+        centre_truth = truth(mesh.centres(p), t)
+        for name in errors:
+            errors[name].append(network.estimates(name == "constrained")[0] - centre_truth)
+    return {name: np.array(e) for name, e in errors.items()}

@@ -173,7 +173,7 @@ def simulate(scenario: DistributedScenario, seed: int | None = None, progress: b
     assumed = scenario.filter.assumed_pde
     if assumed is None:
         pde = PdeModel(field.diffusivity, field.velocity, dt)
-    else:  # model-mismatch study: the constraint uses other θ, v than the field (FilterOptions.assumed_pde)
+    else:  # the constraint uses other θ, v than the field (docs/theory/distributed.md §10.1)
         pde = PdeModel(assumed.diffusivity, np.asarray(assumed.velocity, dtype=float), dt)
     network = DistributedFilter(mesh, scenario.filter, sigma, pde)
     formation = GradientFormation(

@@ -1,4 +1,7 @@
-"""Issue 17, Zhang et al. 2023: Table 1 / Fig. 5 and Fig. 4B at the paper's field; the eq. 34 metric (REPORT item A)."""
+"""Zhang et al. (2023), §8: Table 1 / Fig. 5 and Fig. 4B at the paper's field, and the metric of eq. 34.
+
+Theory: docs/theory/distributed.md §10.
+"""
 
 from __future__ import annotations
 
@@ -10,7 +13,12 @@ import pytest
 from mobisense.core.config import load_config
 from mobisense.estimation.distributed.filter import DistributedFilter, PdeModel
 from mobisense.estimation.distributed.mesh import SensorMesh, paper_network
-from mobisense.estimation.distributed.stability import error_map, rescale_length_unit, spectral_radius
+from mobisense.estimation.distributed.stability import (
+    error_map,
+    rescale_length_unit,
+    spectral_radius,
+    translating_mesh_errors,
+)
 from mobisense.estimation.fields.advection_diffusion import AdvectionDiffusionField
 from mobisense.formation.distributed.simulation import DistributedScenario, error_table, simulate
 
@@ -22,7 +30,7 @@ def scenario(name: str) -> DistributedScenario:
     return load_config(PROBLEMS / f"{name}.yaml", DistributedScenario)
 
 
-def test_seed_field_solves_a_rescaled_pde_not_the_printed_one() -> None:
+def test_paper_field_solves_a_rescaled_pde_not_the_printed_one() -> None:
     """sin(π(k1x + k2v1t)) sin(π(k1y + k2v2t)) e^{−2θπ²k2t} solves θ' = θk2/k1², v' = (k2/k1)v exactly."""
     f = AdvectionDiffusionField(THETA, V, 0.05, variant="paper", temporal_wavenumber=1e-4)
     rng = np.random.default_rng(0)
@@ -45,6 +53,7 @@ def _zero_field_growth(positions, cells, options, sigma, shift, steps=400):
     return (norms[-1] / norms[-101]) ** (1.0 / 100)  # over the last 100 steps (gain converged)
 
 
+@pytest.mark.slow  # 400 filter steps per metric
 @pytest.mark.parametrize("metric", ["euclidean", "covariance"])
 def test_error_map_radius_is_the_simulated_growth_rate(metric: str) -> None:
     """Zero field, noise-free data: the constrained chain's state is its error; growth rate = spectral radius.
@@ -80,11 +89,12 @@ def test_eq34_stability_depends_on_the_length_unit_covariance_does_not() -> None
             )
             radii[unit, metric] = spectral_radius(T)
     assert radii[1.0, "euclidean"] > 1.1 and radii[10.0, "euclidean"] < 0.95  # unstable in m, stable in 10 m
-    # equal up to the stopping rule of the Riccati iteration (1e-13 of max|P|, whose entries change with the unit)
-    assert radii[1.0, "covariance"] == pytest.approx(radii[10.0, "covariance"], rel=1e-6)
+    # equal to round-off: the DARE is solved in each unit (measured difference 2e-14 relative)
+    assert radii[1.0, "covariance"] == pytest.approx(radii[10.0, "covariance"], rel=1e-9)
     assert radii[1.0, "covariance"] < 0.95  # measured 0.9131 in every unit
 
 
+@pytest.mark.slow  # closed-loop runs of 200-600 steps
 def test_paper_values_as_printed_constraint_never_helps() -> None:
     """Paper's field and PDE as printed, 4 m cells: the field violates the PDE, so the projection adds error.
 
@@ -100,6 +110,7 @@ def test_paper_values_as_printed_constraint_never_helps() -> None:
     assert float(np.abs(ds["z_constrained"] - ds["z_true"]).isel(time=-1).max()) > 1e6  # measured ~1e34 at 200 s
 
 
+@pytest.mark.slow  # closed-loop runs of 200-600 steps
 def test_paper_field_with_the_pde_it_solves_reproduces_table1_and_fig4b() -> None:
     """Paper's field, eq. 34, constraint with θ' = 0.08, v' = 0.002 v: Table 1's claim and Fig. 4B's growth.
 
@@ -119,32 +130,25 @@ def test_paper_field_with_the_pde_it_solves_reproduces_table1_and_fig4b() -> Non
 
 
 def _polynomial_run(scale: float, seed: int = 0) -> np.ndarray:
-    """Seed mesh scaled by ``scale`` translating through an exact quadratic solution (variation per cell fixed)."""
-    s = scenario("distributed_advection_diffusion")
-    o = s.filter.model_copy(deep=True)
-    o.hessian.ridge = 1e6 * scale**4
-    o.process_std.gradient, o.initial_std.gradient = 1e-4 / scale, 0.02 / scale
-    o.hessian.error_std = 1e-4 / scale**2
-    hess, g0 = 1e-4 * np.array([[1.0, -1.25], [-1.25, 1.0]]) / scale**2, np.array([0.004, -0.003]) / scale
-    pos0, cells = paper_network(30.0 * scale, 24.0 * scale)
+    """The paper's mesh scaled by ``scale`` translating through an exact quadratic solution; std ratio per cell.
 
-    def z(p, t):
+    The field, noise model and mesh velocity are scaled with the mesh, so only the diffusion number θΔt/A changes.
+    """
+    s = scenario("distributed_advection_diffusion")
+    o = rescale_length_unit(s.filter, 1.0 / scale)  # W, P0, ε0, Q of the mesh's length scale
+    hess, g0 = 1e-4 * np.array([[1.0, -1.25], [-1.25, 1.0]]) / scale**2, np.array([0.004, -0.003]) / scale
+
+    def z(p, t):  # exact: v'Hv = 0, so z is linear in t at a fixed point, and quadratic in space
         q = p + V * t
         return 0.5 * np.einsum("...i,ij,...j->...", q, hess, q) + q @ g0 + THETA * np.trace(hess) * t
 
-    mesh = SensorMesh(cells, pos0)
-    rng = np.random.default_rng(seed)
-    net = DistributedFilter(mesh, o, 0.158, PdeModel(THETA, V, 1.0))
-    net.start(pos0, z(pos0, 0.0) + 0.158 * rng.standard_normal(12))
-    err = {True: [], False: []}
-    for k in range(1, 401):
-        p = pos0 + np.array([0.3, 0.2]) * scale * k
-        net.step(p, z(p, float(k)) + 0.158 * rng.standard_normal(12))
-        for c in (True, False):
-            err[c].append(net.estimates(c)[0] - z(mesh.centres(p), float(k)))
-    return np.array(err[True])[50:].std(0) / np.array(err[False])[50:].std(0)
+    pos0, cells = paper_network(30.0 * scale, 24.0 * scale)
+    pde = PdeModel(THETA, V, 1.0)
+    err = translating_mesh_errors(pos0, cells, o, 0.158, pde, z, np.array([0.3, 0.2]) * scale, 400, seed)
+    return err["constrained"][50:].std(0) / err["unconstrained"][50:].std(0)
 
 
+@pytest.mark.slow  # closed-loop runs of 200-600 steps
 def test_the_projection_helps_only_at_small_diffusion_number() -> None:
     """Consistent constraint, covariance metric: θΔt/A = 0.0022 (30 m cells) 9/9, θΔt/A = 0.126 (4 m cells) ≤ 2/9.
 
@@ -152,3 +156,26 @@ def test_the_projection_helps_only_at_small_diffusion_number() -> None:
     """
     assert np.sum(_polynomial_run(1.0) < 1) == 9
     assert np.sum(_polynomial_run(4.0 / 30.0) < 1) <= 2
+
+
+@pytest.mark.slow  # a 600-step closed-loop run
+def test_project_formation_climbs_and_follows_the_drifting_crest() -> None:
+    """Fig. 4B on the project's field: no sign error; the formation trails a crest that drifts along −v.
+
+    Measured (seed 0): the centre moves up the true gradient in 98.7 % of the steps; after 200 s it moves at
+    1.06 m/s along −v (cos 0.9998), the crest of f(r + vt) at ‖v‖ = 1.118 m/s; the mesh starts larger (32.0 m mean
+    link) than the spacing law asks for (27.2 m) and ends at 29.1 m, near its desired 28.4 m on a steeper flank.
+    """
+    s = scenario("distributed_advection_diffusion")
+    ds, field = simulate(s), s.field.build()
+    t, centre = ds["time"].values, ds["centre"].mean("cell").values
+    up = np.einsum("ij,ij->i", np.diff(centre, axis=0), field.gradient(centre[:-1], t[:-1]))
+    assert np.mean(up > 0) > 0.95
+    k0 = int(np.searchsorted(t, 200.0))
+    drift = (centre[-1] - centre[k0]) / (t[-1] - t[k0])
+    assert drift @ -V / (np.linalg.norm(drift) * np.linalg.norm(V)) > 0.99
+    assert np.linalg.norm(drift) == pytest.approx(np.linalg.norm(V), rel=0.15)  # the crest's speed
+    size, desired = ds["distance"].mean("link").values, ds["desired_distance"].mean("link").values
+    assert size[0] > desired[0] + 3.0 and abs(size[-1] - desired[-1]) < 0.1 * desired[-1]
+    grad = np.linalg.norm(field.gradient(centre[[0, -1]], t[[0, -1]]), axis=-1)
+    assert grad[1] > grad[0]  # it ends on a steeper flank than it started: smaller desired spacing than at the crest
