@@ -14,7 +14,7 @@ from mobisense.core.config import load_config, parse_config
 from mobisense.estimation.cooperative.noise_config import CooperativeNoise
 from mobisense.estimation.fields.library import QuadraticField
 from mobisense.formation.replay.estimator import ClosedLoopEstimator, WindowHessian
-from mobisense.formation.replay.results import replay_dataset
+from mobisense.formation.replay.results import mean_abs_curvature, replay_dataset
 from mobisense.formation.replay.scenario import FieldReplayScenario
 from mobisense.formation.replay.simulation import build_system, simulate
 
@@ -94,16 +94,6 @@ def test_constant_noise_freezes_step_3a_and_the_hessian_error_model_frees_it() -
     assert a4 < 1.95 and a8 - a4 > 1.0
 
 
-def _mean_abs_curvature(path: np.ndarray, step: float = 0.05) -> float:
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
-    su = np.arange(0.0, s[-1], step)
-    p = np.stack([np.interp(su, s, path[:, i]) for i in range(2)], axis=-1)
-    v = np.gradient(p, step, axis=0)
-    acc = np.gradient(v, step, axis=0)
-    k = (v[:, 0] * acc[:, 1] - v[:, 1] * acc[:, 0]) / np.linalg.norm(v, axis=1) ** 3
-    return float(np.mean(np.abs(k[5:-5])))
-
-
 @pytest.mark.slow  # closed-loop replays of 8-40 time units
 def test_fig3_the_filtered_centre_path_is_smoother_than_the_noisy_level_curve() -> None:
     """Fig. 3. Mean |curvature| (1/L): true curve 0.19, noisy curve z + w = 4 0.96, centre with the filter 0.22,
@@ -125,10 +115,10 @@ def test_fig3_the_filtered_centre_path_is_smoother_than_the_noisy_level_curve() 
     plt.close("all")
     t = with_filter["time"].values
     rough = {
-        name: _mean_abs_curvature(ds["center"].values[t >= 5.0])
+        name: mean_abs_curvature(ds["center"].values[t >= 5.0])
         for name, ds in (("kf", with_filter), ("none", without))
     }
-    assert rough["kf"] < 0.5 * _mean_abs_curvature(noisy_curve) and rough["kf"] < 0.5 * rough["none"]
+    assert rough["kf"] < 0.5 * mean_abs_curvature(noisy_curve) and rough["kf"] < 0.5 * rough["none"]
     half = t >= 20.0
     rms = {
         name: float(np.sqrt(np.mean((ds["z_true"].values[half] - 4.0) ** 2)))
@@ -160,3 +150,10 @@ def test_two_charges_level_error_is_the_hessian_fits_curvature_offset_not_noise(
     )
     assert noise_free > 0.7 * shipped
     assert exact_hessian < 0.5 * noise_free
+
+
+def test_mean_abs_curvature_of_circles_and_lines() -> None:
+    """|κ| = 0.5 on a circle of radius 2 (400-point polygon, linear resampling: within 0.1 %); 0 on a line."""
+    theta = np.linspace(0.0, 1.5 * np.pi, 400)
+    assert mean_abs_curvature(2.0 * np.stack([np.cos(theta), np.sin(theta)], axis=-1)) == pytest.approx(0.5, rel=1e-3)
+    assert mean_abs_curvature(np.stack([np.linspace(0, 5, 7), np.linspace(1, 3, 7)], axis=-1)) < 1e-9
