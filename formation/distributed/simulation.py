@@ -414,12 +414,18 @@ class DistributedResult(SimulationResult):
         s = self.summary
         print(f"{s['scenario']}: {s['steps']} steps, noise σ = {s['noise_std']:.4g}, seed {s['seed']}")
         print(f"{'cell':>4} {'mean_n':>9} {'mean_u':>9} {'mean_c':>9} {'std_n':>8} {'std_u':>8} {'std_c':>8}")
+        def number(x: float, width: int) -> str:  # fixed point, or exponent for a diverged estimate
+            return f"{x:>{width}.4f}" if abs(x) < 1e4 else f"{x:>{width}.2e}"
+
         for row in s["error_table"]:
-            print(
-                f"{row['cell']:>4} {row['mean_noise']:>9.4f} {row['mean_unconstrained']:>9.4f} "
-                f"{row['mean_constrained']:>9.4f} {row['std_noise']:>8.4f} {row['std_unconstrained']:>8.4f} "
-                f"{row['std_constrained']:>8.4f}"
-            )
+            keys = ("mean_noise", "mean_unconstrained", "mean_constrained")
+            means = " ".join(number(row[k], 9) for k in keys)
+            stds = " ".join(number(row[k], 8) for k in ("std_noise", "std_unconstrained", "std_constrained"))
+            print(f"{row['cell']:>4} {means} {stds}")
+        worst = max(row["std_constrained"] for row in s["error_table"])
+        if not worst < 1e3 * max(row["std_noise"] for row in s["error_table"]):
+            print(f"the constrained estimate diverged (error std up to {worst:.2e}): projection "
+                  f"'{self.scenario.filter.projection}' is unstable here (docs/theory/distributed.md §10.2)")
         better = s["cells_with_lower_constrained_std"]
         print(f"constrained std lower in {len(better)}/{len(s['error_table'])} cells; results in {folder}/")
 

@@ -6,6 +6,8 @@ Theory: docs/theory/indirect.md §3.4 and §3.5.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from reference_problems import hussein2008
@@ -15,7 +17,9 @@ from mobisense.ocp.homotopy import fixed_schedule
 from mobisense.ocp.indirect.hamiltonian import hamiltonian_system
 from mobisense.ocp.indirect.solver import follow_schedule, kalman_guess, make_bvp_solver, solve_indirect
 from mobisense.ocp.model import Structure
-from mobisense.ocp.problem import Problem
+from mobisense.ocp.problem import Problem, load_problem
+
+PROBLEMS = Path(__file__).resolve().parents[2] / "problems"
 
 pytestmark = pytest.mark.slow  # direct and indirect solves of seconds each
 
@@ -56,7 +60,9 @@ def test_paper_continuation_fails_at_its_first_step():
     # solve_bvp from the Kalman filter and its adjoint costates at ε = δ = 0.05: past the fold of the Kalman
     # branch (ε ≈ 0.0059) only the far branch exists; Newton stays near coasting (Σ(tf) ≈ 1.004) and the mesh
     # outgrows the node limit (also measured with 5000 and 20000 nodes, tol 1e-6 and 1e-8: indirect.md §3.4)
-    problem = Problem.from_dict(hussein2008(method="indirect", bvp=PAPER_BVP))
+    problem = load_problem(PROBLEMS / "hussein2008_paper.yaml")  # the shipped file: δ = 0.05 and PAPER_BVP
+    assert problem.solver.homotopy.step == 0.05
+    assert problem.solver.bvp.model_dump(include=set(PAPER_BVP)) == PAPER_BVP
     solution = solve_indirect(problem)
     assert solution.status == "failed" and solution.eps == 0.0
     assert [h.eps for h in solution.homotopy] == [0.05]
