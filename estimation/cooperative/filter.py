@@ -35,7 +35,6 @@ Example
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
@@ -50,6 +49,7 @@ from .information_model import (
     transition_matrix,
 )
 from .noise_config import CooperativeNoise
+from .rollouts import OUTPUTS, rollout_casadi, rollout_components, rollout_shared
 
 __all__ = [
     "HessianSource",
@@ -90,25 +90,35 @@ class CooperativeFilterResult:
     ----------
     positions : ndarray, shape (B, K, N, 2) or (K, N, 2)
     centers : ndarray, shape (B, K, 2) or (K, 2)
-    states, states_prior : ndarray, shape (B, K, 3) or (K, 3)
-        Posterior ``s_k(+)`` and predicted ``s_k(−)`` estimates of ``[z, ∂z/∂x, ∂z/∂y]`` at the centre.
-    covariances, covariances_prior : ndarray, shape (B, K, 3, 3) or (K, 3, 3)
-        ``P_k(+)``, ``P_k(−)``; unbatched when the positions are shared by all runs.
-    innovations : ndarray, shape (B, K, N) or (K, N)
-    innovation_covariances : ndarray, shape ([B,] K, N, N)
+    states : ndarray, shape (B, K, 3) or (K, 3)
+        Posterior estimates ``s_k(+)`` of ``[z, ∂z/∂x, ∂z/∂y]`` at the centre.
+    covariances : ndarray, shape (B, K, 3, 3) or (K, 3, 3)
+        ``P_k(+)``; unbatched when the positions are shared by all runs.
     hessians : ndarray, shape ([B,] K, 2, 2)
         The Hessian input used at each step.
+    states_prior, covariances_prior : ndarray or None
+        Predicted ``s_k(−)`` (shape of ``states``) and ``P_k(−)`` (shape of ``covariances``); None when
+        the filter ran with ``outputs="posterior"``.
+    innovations : ndarray, shape (B, K, N) or (K, N), or None
+    innovation_covariances : ndarray, shape ([B,] K, N, N), or None
+    meta : dict
+        ``engine``, ``rollout`` and ``outputs`` used.
+
+    Notes
+    -----
+    The arrays of the numpy engine are views of its time-major storage (not C-contiguous): copy one
+    (``np.ascontiguousarray``) before handing it to code that needs contiguous memory.
     """
 
     positions: np.ndarray
     centers: np.ndarray
     states: np.ndarray
-    states_prior: np.ndarray
     covariances: np.ndarray
-    covariances_prior: np.ndarray
-    innovations: np.ndarray
-    innovation_covariances: np.ndarray
     hessians: np.ndarray
+    states_prior: np.ndarray | None = None
+    covariances_prior: np.ndarray | None = None
+    innovations: np.ndarray | None = None
+    innovation_covariances: np.ndarray | None = None
     meta: dict[str, Any] = field(default_factory=dict)
 
     def nees(self, true_states: np.ndarray) -> np.ndarray:
@@ -118,6 +128,8 @@ class CooperativeFilterResult:
 
     def nis(self) -> np.ndarray:
         """Normalised innovation squared ``ν' S⁻¹ ν`` per run and step, shape ``([B,] K)``."""
+        if self.innovations is None or self.innovation_covariances is None:
+            raise ValueError("nis: this result has no innovations (the filter ran with outputs='posterior')")
         nu = self.innovations
         return np.einsum("...i,...i->...", nu, np.linalg.solve(self.innovation_covariances, nu[..., None])[..., 0])
 
@@ -132,16 +144,17 @@ class CooperativeFilterResult:
             return (lead if array.ndim - len(tail) == len(lead) else ("step",)) + tail
 
         state_names = ["z", "dz_dx", "dz_dy"]
-        data = {
-            "positions": (dims(self.positions, ("platform", "xy")), self.positions),
-            "center": (dims(self.centers, ("xy",)), self.centers),
-            "estimate": (lead + ("state",), self.states),
-            "estimate_prior": (lead + ("state",), self.states_prior),
-            "covariance": (dims(self.covariances, ("state", "state2")), self.covariances),
-            "covariance_prior": (dims(self.covariances_prior, ("state", "state2")), self.covariances_prior),
-            "innovation": (lead + ("platform",), self.innovations),
-            "hessian": (dims(self.hessians, ("xy", "xy2")), self.hessians),
+        tails = {
+            "positions": (self.positions, ("platform", "xy")),
+            "center": (self.centers, ("xy",)),
+            "estimate": (self.states, ("state",)),
+            "estimate_prior": (self.states_prior, ("state",)),
+            "covariance": (self.covariances, ("state", "state2")),
+            "covariance_prior": (self.covariances_prior, ("state", "state2")),
+            "innovation": (self.innovations, ("platform",)),
+            "hessian": (self.hessians, ("xy", "xy2")),
         }
+        data = {name: (dims(a, tail), a) for name, (a, tail) in tails.items() if a is not None}
         ds = xr.Dataset(
             data,
             coords={"state": state_names, "state2": state_names, "xy": ["x", "y"], "xy2": ["x", "y"]},
@@ -266,103 +279,6 @@ def model_sequence(positions: np.ndarray, hessians: np.ndarray, noise: Cooperati
     }
 
 
-def _rollout_numpy(model: dict[str, np.ndarray], measurements: np.ndarray, x0: np.ndarray, P0: np.ndarray) -> dict:
-    K = measurements.shape[-2]
-    state_batch = np.broadcast_shapes(measurements.shape[:-2], x0.shape[:-1], model["C"].shape[:-3], P0.shape[:-2])
-    covariance_batch = np.broadcast_shapes(model["C"].shape[:-3], P0.shape[:-2])  # data-independent recursion
-    x = np.broadcast_to(x0, state_batch + (3,))[..., None]
-    P = np.broadcast_to(P0, covariance_batch + (3, 3))
-    out: dict[str, list[np.ndarray]] = {k: [] for k in ("xm", "Pm", "x", "P", "nu", "S")}
-    for k in range(K):
-        x, P = kalman.predict(x, P, model["F"][..., k, :, :], model["Q"][..., k, :, :], model["u"][..., k, :, :])
-        out["xm"].append(x[..., 0])
-        out["Pm"].append(P)
-        y = (measurements[..., k, :] - model["DH"][..., k, :])[..., None]
-        x, P, nu, S = kalman.update(x, P, y, model["C"][..., k, :, :], model["R"][..., k, :, :])
-        P = kalman.symmetrize(P)
-        for name, value in (("x", x[..., 0]), ("P", P), ("nu", nu[..., 0]), ("S", S)):
-            out[name].append(value)
-    axis_of = {"xm": -2, "x": -2, "nu": -2, "Pm": -3, "P": -3, "S": -3}
-    return {k: np.stack(v, axis=axis_of[k]) for k, v in out.items()}
-
-
-#: steps per call of the compiled rollout's body (amortises CasADi's per-call overhead)
-_UNROLL = 8
-
-
-@functools.lru_cache(maxsize=1)
-def _rollout_body() -> Any:
-    """:func:`kalman.predict` + :func:`kalman.information_update` for ``_UNROLL`` steps, as a CasADi function.
-
-    Only 3 × 3 algebra is left in the sequential part: the transition is built from ``Δr`` (structural
-    zeros), ``M`` is a constant parameter, and the measurement information ``J_k, j_k`` of all steps is
-    computed beforehand (numpy, vectorised over time). The function is compiled to machine code once
-    per process when a C compiler is on the PATH (CasADi's JIT, ~1 s); otherwise CasADi's virtual
-    machine evaluates it (about 3x slower, same results).
-    """
-    import shutil
-
-    import casadi as ca
-
-    x, P, M = ca.SX.sym("x", 3), ca.SX.sym("P", 3, 3), ca.SX.sym("M", 3, 3)
-    dr, u = ca.SX.sym("dr", 2, _UNROLL), ca.SX.sym("u", 3, _UNROLL)
-    J, j = ca.SX.sym("J", 3, 3 * _UNROLL), ca.SX.sym("j", 3, _UNROLL)
-    xs, Ps = [], []
-    xk, Pk = x, P
-    for i in range(_UNROLL):
-        xk, Pk = kalman.predict(xk, Pk, transition_matrix(dr[:, i]), M, u[:, i])
-        xk, Pk = kalman.information_update(xk, Pk, J[:, 3 * i : 3 * i + 3], j[:, i])
-        xs.append(xk)
-        Ps.append(Pk)
-    inputs, outputs = [x, P, dr, u, J, j, M], [xk, Pk, ca.horzcat(*xs), ca.horzcat(*Ps)]
-    if shutil.which("gcc") or shutil.which("cc"):
-        options = {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O2"], "verbose": False}}
-        try:
-            return ca.Function("cooperative_steps", inputs, outputs, options)
-        except RuntimeError:  # compiler present but unusable: fall back to the virtual machine
-            pass
-    return ca.Function("cooperative_steps", inputs, outputs)
-
-
-@functools.lru_cache(maxsize=16)
-def _compiled_rollout(n_chunks: int) -> Any:
-    """``mapaccum`` of :func:`_rollout_body` over ``n_chunks`` calls, accumulating ``(x, P)``."""
-    return _rollout_body().mapaccum("cooperative_rollout", n_chunks, 2)
-
-
-def _hstack(array: np.ndarray) -> np.ndarray:
-    """``(K, n, m)`` matrices → ``[X_0, X_1, …]`` of shape ``(n, K·m)``, CasADi's layout for mapped inputs."""
-    K, n, m = array.shape
-    return np.transpose(array, (1, 0, 2)).reshape(n, K * m)
-
-
-def _rollout_casadi(model: dict[str, np.ndarray], measurements: np.ndarray, x0: np.ndarray, P0: np.ndarray) -> dict:
-    K = measurements.shape[0]
-    y = (measurements - model["DH"])[..., None]
-    J, j = kalman.information_contribution(y, model["C"], model["R"])
-    x_first, P_first = kalman.information_update(x0[:, None], P0, J[0], j[0])  # step 0: no prediction
-    n_chunks = max(1, -(-(K - 1) // _UNROLL))
-    pad = n_chunks * _UNROLL - (K - 1)  # trailing steps without information, discarded
-
-    def padded(a: np.ndarray) -> np.ndarray:
-        return np.concatenate([a[1:], np.zeros((pad,) + a.shape[1:])])
-
-    shifts = model["F"][:, 0, 1:]  # Δr_k from A_k = [[1, Δr'], [0, I]]
-    res = _compiled_rollout(n_chunks)(
-        x_first, P_first, padded(shifts).T, padded(model["u"][..., 0]).T, _hstack(padded(J)),
-        padded(j[..., 0]).T, model["Q"][-1],
-    )  # fmt: skip
-    x = np.concatenate([x_first.T, np.asarray(res[2]).T[: K - 1]])
-    P_all = np.transpose(np.asarray(res[3]).reshape(3, n_chunks * _UNROLL, 3), (1, 0, 2))  # (3, ·3) → (·, 3, 3)
-    P = np.concatenate([P_first[None], P_all[: K - 1]])
-    # priors, innovations and their covariances for all steps at once, with the same kernels
-    x_prev = np.concatenate([x0[None], x[:-1]])[..., None]
-    P_prev = np.concatenate([P0[None], P[:-1]])
-    xm, Pm = kalman.predict(x_prev, P_prev, model["F"], model["Q"], model["u"])
-    nu, S = kalman.innovation(xm, Pm, y, model["C"], model["R"])
-    return {"x": x, "P": P, "xm": xm[..., 0], "Pm": Pm, "nu": nu[..., 0], "S": S}
-
-
 def run_cooperative_filter(
     positions: np.ndarray,
     measurements: np.ndarray,
@@ -372,6 +288,7 @@ def run_cooperative_filter(
     hessians: np.ndarray | HessianSource | None = None,
     engine: Literal["auto", "numpy", "casadi"] = "auto",
     initial_hessian: np.ndarray | None = None,
+    outputs: Literal["all", "posterior"] = "all",
 ) -> CooperativeFilterResult:
     """Run the cooperative Kalman filter over a trajectory (docs/theory/cooperative.md §2, eqs. cooperative.6–9).
 
@@ -390,10 +307,15 @@ def run_cooperative_filter(
         ``Ĥ_{c,k}``: given, estimated in the loop, or zero.
     engine : {"auto", "numpy", "casadi"}
         ``casadi`` compiles the whole rollout (single run, array Hessians only); ``auto`` picks it for
-        a single run and numpy otherwise.
+        a single run and numpy otherwise. With numpy, positions and covariance shared by all runs run
+        the covariance recursion once and the states by eq. cooperative.16; otherwise every run is
+        filtered with its own covariances, all runs at once (:mod:`~mobisense.estimation.cooperative.rollouts`).
     initial_hessian : ndarray, shape ([B,] 2, 2), optional
         Closed loop only: the previous estimate ``Hᵖ`` handed to the source at the first step (zero by
         default). The curvature method keeps the part of ``Hᵖ`` a single snapshot cannot observe.
+    outputs : {"all", "posterior"}
+        ``posterior`` keeps only the states and covariances ``s(+)``, ``P(+)`` (priors and innovations
+        are None): less memory, and 2–4x faster for large batches.
 
     Returns
     -------
@@ -402,6 +324,8 @@ def run_cooperative_filter(
     positions = np.asarray(positions, dtype=float)
     measurements = np.asarray(measurements, dtype=float)
     check_filter_inputs(positions, measurements)
+    if outputs not in OUTPUTS:
+        raise ValueError(f"outputs: expected one of {OUTPUTS}, got {outputs!r}")
     x0 = np.asarray(initial_state, dtype=float)
     P0 = np.asarray(initial_covariance, dtype=float)
     closed_loop = hessians is not None and callable(hessians)
@@ -414,13 +338,18 @@ def run_cooperative_filter(
         H0 = np.zeros((2, 2)) if initial_hessian is None else np.asarray(initial_hessian, dtype=float)
         return _run_closed_loop(positions, measurements, noise, x0, P0, hessians, H0)
     hessian_array = np.zeros(positions.shape[:-2] + (2, 2)) if hessians is None else np.asarray(hessians, float)
-    model = model_sequence(positions, hessian_array, noise)
-    roll = _rollout_casadi if engine == "casadi" else _rollout_numpy
-    out = roll(model, measurements, x0, P0)
+    if engine == "casadi" or (positions.ndim == 3 and P0.ndim == 2):
+        model = model_sequence(positions, hessian_array, noise)
+        roll, rollout = (rollout_casadi, "compiled") if engine == "casadi" else (rollout_shared, "shared")
+        out = roll(model, measurements, x0, P0, outputs)
+        centers = model["centers"]
+    else:
+        out = rollout_components(positions, hessian_array, noise, measurements, x0, P0, outputs)
+        centers, rollout = out["centers"], "components"
     return CooperativeFilterResult(
-        positions=positions, centers=model["centers"], states=out["x"], states_prior=out["xm"],
-        covariances=out["P"], covariances_prior=out["Pm"], innovations=out["nu"],
-        innovation_covariances=out["S"], hessians=hessian_array, meta={"engine": engine},
+        positions=positions, centers=centers, states=out["x"], covariances=out["P"], hessians=hessian_array,
+        states_prior=out.get("xm"), covariances_prior=out.get("Pm"), innovations=out.get("nu"),
+        innovation_covariances=out.get("S"), meta={"engine": engine, "rollout": rollout, "outputs": outputs},
     )  # fmt: skip
 
 
@@ -456,7 +385,7 @@ def _run_closed_loop(
         positions=positions, centers=formation_center(positions), states=stacked["x"],
         states_prior=stacked["xm"], covariances=stacked["P"], covariances_prior=stacked["Pm"],
         innovations=stacked["nu"], innovation_covariances=stacked["S"], hessians=stacked["H"],
-        meta={"engine": "numpy", "hessian_source": type(source).__name__},
+        meta={"engine": "numpy", "rollout": "closed loop", "outputs": "all", "hessian_source": type(source).__name__},
     )  # fmt: skip
 
 
