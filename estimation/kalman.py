@@ -11,6 +11,7 @@ are columns inside the kernels.
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
@@ -36,13 +37,16 @@ __all__ = [
 ]
 
 
+_NUMERIC = (np.ndarray, float, int, np.floating)
+
+
 def _is_numeric(x: Any) -> bool:
-    return isinstance(x, (np.ndarray, float, int, np.floating))
+    return type(x) is np.ndarray or isinstance(x, _NUMERIC)
 
 
 def transpose(X: Any) -> Any:
-    """Swap the last two axes (numpy, batched) or transpose (CasADi)."""
-    return np.swapaxes(X, -1, -2) if _is_numeric(X) else X.T
+    """Swap the last two axes (numpy, batched) or transpose (CasADi, component matrices)."""
+    return X.swapaxes(-1, -2) if type(X) is np.ndarray else np.swapaxes(X, -1, -2) if _is_numeric(X) else X.T
 
 
 def solve(S: Any, Y: Any) -> Any:
@@ -68,14 +72,21 @@ def inverse(S: Any) -> Any:
 
 
 def identity(n: int, like: Any) -> Any:
-    """``I_n`` as numpy array, component matrix or CasADi ``SX`` matching ``like``."""
+    """``I_n`` as numpy array (read-only, shared), component matrix or CasADi ``SX`` matching ``like``."""
     if _is_numeric(like):
-        return np.eye(n)
+        return _eye(n)
     if isinstance(like, ComponentMatrix):
         return ComponentMatrix.identity(n)
     import casadi as ca
 
     return ca.SX.eye(n)
+
+
+@functools.lru_cache(maxsize=32)
+def _eye(n: int) -> np.ndarray:
+    eye = np.eye(n)
+    eye.flags.writeable = False
+    return eye
 
 
 def symmetrize(P: Any) -> Any:
