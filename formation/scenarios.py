@@ -42,6 +42,12 @@ class Scenario:
     config: Any
     source: Path
 
+    def estimates(self) -> list[Any]:
+        """Memory and time of :meth:`run` (:class:`mobisense.core.budget.Estimate` items) from the sizes."""
+        from .sizes import scenario_estimates
+
+        return scenario_estimates(self.kind, self.config, self.source)
+
     def run(self, seed: int | None = None, progress: bool = False, animate: bool = False) -> SimulationResult:
         """Simulate the scenario.
 
