@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
 import numpy as np
-from pydantic import AfterValidator, BaseModel, ConfigDict, ValidationError
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
 
 from .errors import ConfigError, brief
 from .reader import read_document
@@ -35,6 +35,7 @@ __all__ = [
     "NonNegativeFloat",
     "Vector2",
     "Matrix",
+    "Seed",
     "MAX_MAGNITUDE",
     "MIN_MAGNITUDE",
     "check_square",
@@ -108,6 +109,8 @@ PositiveFloat = Annotated[float, AfterValidator(_finite), AfterValidator(_positi
 NonNegativeFloat = Annotated[float, AfterValidator(_finite), AfterValidator(_non_negative)]
 Vector2 = Annotated[list[FiniteFloat], AfterValidator(_vector2)]
 Matrix = Annotated[list[list[FiniteFloat]], AfterValidator(_matrix)]
+#: a random seed: what ``numpy.random.default_rng`` accepts (0 … 2⁶³ − 1)
+Seed = Annotated[int, Field(ge=0, le=2**63 - 1)]
 
 
 def check_shape(name: str, value: list[list[float]], shape: tuple[int, int]) -> np.ndarray:
@@ -223,7 +226,8 @@ def format_location(loc: tuple[Any, ...], model: type[BaseModel] | None = None) 
         if isinstance(part, int):
             out += f"[{part}]"
         else:
-            out += f".{part}" if out else str(part)
+            name = str(part) if len(str(part)) <= 60 else f"{str(part)[:40]}…({len(str(part))} characters)"
+            out += f".{name}" if out else name
     return out or "(top level)"
 
 

@@ -164,8 +164,11 @@ class OutputFolder:
             if same:
                 break
             os.close(fd)
-        os.ftruncate(fd, 0)
-        os.write(fd, f"{os.getpid()}\n".encode())
+        try:
+            os.ftruncate(fd, 0)
+            os.write(fd, f"{os.getpid()}\n".encode())
+        except OSError:  # a full disk: the lock holds without the pid (writing the results will report it)
+            pass
         self._fd = fd
         remove_stale_temporaries(self.path)
         return self

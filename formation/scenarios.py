@@ -88,6 +88,10 @@ def replay_kind(data: Any, source: Path) -> str:
     """``field_replay`` or ``plan_replay`` from the keys of a replay file; ``ConfigError`` if neither."""
     from ..core.config import ConfigError
 
+    if data is None:
+        raise ConfigError(f"{source}: (top level): the file is empty; expected a mapping of keys")
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: (top level): expected a mapping of keys (a field replay or a plan replay)")
     if isinstance(data, dict) and "field" in data:
         return "field_replay"
     if isinstance(data, dict) and "solution" in data:
