@@ -45,17 +45,27 @@ def _distributed(config: Any) -> list[Estimate]:
     return [Estimate(what, _COPIES * 8.0 * floats, "use a larger time.step or a shorter time.duration", seconds)]
 
 
-def _reference_problem(solution: Path | None, problem: Path | None) -> tuple[Any, list[Estimate]]:
-    """The problem of a referenced solution (read from the file, or the problem file it would be solved from)."""
+def _reference_problem(
+    source: Path, key: str, solution: Path | None, problem: Path | None
+) -> tuple[Any, list[Estimate]]:
+    """The problem of a referenced solution (read from the file, or the problem file it would be solved from).
+
+    ``ConfigError`` names the scenario file and the key (``motion.solution``) before the referenced file's error.
+    """
+    from ..core.errors import ConfigError
     from ..ocp.problem import load_problem
     from ..ocp.sizes import problem_estimates
     from ..ocp.solution import Solution
 
-    if solution is not None and solution.is_file():
-        return Solution.read_problem(solution), []
-    if problem is not None and problem.is_file():
-        p = load_problem(problem)
-        return p, problem_estimates(p, method="direct")
+    try:
+        if solution is not None and solution.exists():
+            return Solution.read_problem(solution), []
+        if problem is not None and problem.exists():
+            p = load_problem(problem)
+            return p, problem_estimates(p, method="direct")
+    except ConfigError as err:
+        which = key if solution is not None and solution.exists() else key.replace("solution", "problem")
+        raise ConfigError(f"{source}: {which}: {err}") from None
     return None, []
 
 
@@ -69,7 +79,8 @@ def _field_replay(config: Any, source: Path) -> list[Estimate]:
                       steps * (3e-3 + 0.5e-3 * N))]  # fmt: skip
     motion = config.motion
     if getattr(motion, "kind", None) == "reference":
-        _, solve = _reference_problem(resolve(source, motion.solution), resolve(source, motion.problem))
+        paths = resolve(source, motion.solution), resolve(source, motion.problem)
+        _, solve = _reference_problem(source, "motion.solution", *paths)
         parts += solve
     return parts
 
@@ -77,7 +88,8 @@ def _field_replay(config: Any, source: Path) -> list[Estimate]:
 def _plan_replay(config: Any, source: Path) -> list[Estimate]:
     from .replay.plan import resolve
 
-    problem, parts = _reference_problem(resolve(source, config.solution), resolve(source, config.problem))
+    paths = resolve(source, config.solution), resolve(source, config.problem)
+    problem, parts = _reference_problem(source, "solution", *paths)
     if problem is None:
         return parts  # the run reports the missing file (exit 2) before computing anything
     mc = config.monte_carlo
