@@ -49,7 +49,9 @@ def _number(x: Any) -> bool:
 
 
 def value_kind(values: list[Any]) -> str:
-    """How a varied key's values are stored: ``int64``, ``float64``, ``list`` (of float64) or ``json`` (text)."""
+    """How a varied key's values are stored: ``int64``, ``float64``, ``string``, ``list`` (of float64) or ``json``."""
+    if values and all(isinstance(x, str) for x in values):
+        return "string"
     if values and all(isinstance(x, int) and not isinstance(x, bool) for x in values):
         return "int64" if all(abs(x) < 2**63 for x in values) else "json"
     if values and all(_number(x) and math.isfinite(x) for x in values):
@@ -75,7 +77,8 @@ class ResultStore:
 
         self.path = Path(folder) / RESULTS
         self.kinds = value_kinds
-        arrow = {"int64": pa.int64(), "float64": pa.float64(), "list": pa.list_(pa.float64()), "json": pa.string()}
+        arrow = {"int64": pa.int64(), "float64": pa.float64(), "string": pa.string(), "list": pa.list_(pa.float64()),
+                 "json": pa.string()}  # fmt: skip
         fields = [pa.field("task", pa.string()), pa.field("index", pa.int64())]
         fields += [pa.field(key, arrow[kind]) for key, kind in value_kinds.items()]
         types = {"string": pa.string(), "float64": pa.float64(), "int64": pa.int64(), "bool": pa.bool_()}

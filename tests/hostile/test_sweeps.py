@@ -103,7 +103,7 @@ def test_non_local_scheduler_without_tls_warns(tmp_path):
 @pytest.fixture()
 def finished_sweep(tmp_path):
     path = _write(tmp_path, {"cost.alpha": [0.002, 0.004]})
-    out = tmp_path / "out"
+    out = tmp_path / "result"
     outcome = attack("sweep", _args(path, out, "--workers", "1"), tmp_path, 0, (), out, limit=300)
     assert outcome.verdict in GOOD, outcome.problems
     return path, out
@@ -136,7 +136,7 @@ def test_corrupt_manifest_on_resume(tmp_path, finished_sweep):
 
 
 def test_sweep_into_a_folder_of_another_command(tmp_path):
-    out = tmp_path / "out"
+    out = tmp_path / "result"
     out.mkdir()
     (out / "summary.json").write_text("{}")
     path = _write(tmp_path, {"cost.alpha": [0.1]})
