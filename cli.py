@@ -71,6 +71,16 @@ def _terminate(signum: int, frame: Any) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (also used by ``python -m``/console script)."""
+    said: list[str] = []
+    try:
+        return _main(argv, said)
+    except KeyboardInterrupt:  # also during the imports, or while an error is being reported
+        if not said:
+            _say("interrupted; files already written are complete")
+        return 130
+
+
+def _main(argv: Sequence[str] | None, said: list[str]) -> int:
     from .core.errors import ComputationError, ConfigError, OutputError, one_line
 
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -89,6 +99,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _say(f"error: {one_line(str(err), 600)}")
         return 1
     except KeyboardInterrupt:
+        said.append("interrupted")
         _say("interrupted; files already written are complete")
         return 130
     except MemoryError:

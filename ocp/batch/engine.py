@@ -33,6 +33,7 @@ def open_client(scheduler: str | None, workers: int | None, security: Any = None
     closes them, without a traceback from every worker.
     """
     import os
+    import warnings
 
     import dask
     from dask.distributed import Client, LocalCluster
@@ -53,6 +54,8 @@ def open_client(scheduler: str | None, workers: int | None, security: Any = None
             yield client
         return
     n = workers or os.cpu_count() or 1
+    # the scheduler's HTTP server (no dashboard here) falls back to a free port when 8787 is taken: not news
+    warnings.filterwarnings("ignore", message="Port .* is already in use", category=UserWarning)
     # dask sets MALLOC_TRIM_THRESHOLD_ in its workers, which also freezes glibc's mmap threshold: MUMPS' large
     # per-factorisation workspaces then go through mmap/munmap and page faults. Unset it for our workers.
     with (

@@ -88,7 +88,13 @@ def temporaries(folder: Path) -> list[Path]:
 
 
 def classify(
-    outcome: Outcome, expect: int, mentions: tuple[str, ...], folder: Path, out: Path | None, one_line: bool = True
+    outcome: Outcome,
+    expect: int,
+    mentions: tuple[str, ...],
+    folder: Path,
+    out: Path | None,
+    one_line: bool = True,
+    others: tuple[Path, ...] = (),
 ) -> Outcome:
     """Set ``outcome.verdict`` (and ``problems``) from the exit status, messages and files left."""
     problems = outcome.problems
@@ -110,7 +116,7 @@ def classify(
     if problems:
         outcome.verdict = "wrong result"
         return outcome
-    left = temporaries(folder)
+    left = [p for p in temporaries(folder) if p not in others]
     if expect == 2 and out is not None and out.exists():
         left.append(out)
     if expect == 2 and (folder / "out").exists():
@@ -133,10 +139,15 @@ def attack(
     limit: float = TIME_LIMIT,
     memory: int = MEMORY_CAP,
     one_line: bool = True,
+    others: tuple[Path, ...] = (),
 ) -> Outcome:
-    """Run ``mobisense ARGS`` in ``folder``, classify and record it under ``command``."""
+    """Run ``mobisense ARGS`` in ``folder``, classify and record it under ``command``.
+
+    ``others`` are files another (live) process holds, such as its lock: not left behind by this run.
+    """
     code, stdout, stderr, seconds = finish(start(args, folder, memory), limit)
-    outcome = classify(Outcome(command, code, stdout, stderr, seconds), expect, mentions, folder, out, one_line)
+    outcome = Outcome(command, code, stdout, stderr, seconds)
+    outcome = classify(outcome, expect, mentions, folder, out, one_line, others)
     RECORD[command][outcome.verdict] += 1
     return outcome
 

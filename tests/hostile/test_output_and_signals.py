@@ -93,19 +93,14 @@ def test_full_disk_keeps_the_previous_result(tmp_path, tmpfs):
     first = attack("solve", kind.command(path, out), tmp_path, 0, (), out)
     assert first.verdict in GOOD, first.problems
     digest = hashlib.sha256((out / "solution.nc").read_bytes()).hexdigest()
-    with open(disk / "filler", "wb") as filler:  # fill the disk to the last byte
+    filler = os.open(disk / "filler", os.O_WRONLY | os.O_CREAT)
+    for chunk in (65536, 4096, 1):  # fill the disk to the last byte
         try:
             while True:
-                filler.write(b"\0" * 65536)
-                filler.flush()
+                os.write(filler, b"\0" * chunk)
         except OSError:
             pass
-        try:
-            while True:
-                filler.write(b"\0")
-                filler.flush()
-        except OSError:
-            pass
+    os.close(filler)
     second = attack("solve", kind.command(path, out), tmp_path, 1, ("No space left on device", "unchanged"), out)
     assert second.verdict in GOOD, second.problems
     assert hashlib.sha256((out / "solution.nc").read_bytes()).hexdigest() == digest
@@ -123,7 +118,8 @@ def test_second_writer_is_refused_naming_the_holder(tmp_path):
         fcntl.flock(lock, fcntl.LOCK_EX)
         os.write(lock, f"{holder.pid}\n".encode())
         outcome = attack("solve", kind.command(path, out), tmp_path, 2, ("in use by another mobisense run",
-                                                                           f"pid {holder.pid}"), None)
+                                                                           f"pid {holder.pid}"), None,
+                         others=(out / ".mobisense.lock",))  # fmt: skip
         assert outcome.verdict in GOOD, outcome.problems
         assert not (out / "solution.nc").exists()
     finally:
@@ -142,7 +138,8 @@ def test_two_concurrent_solves_into_one_folder(tmp_path):
     deadline = time.monotonic() + 30
     while not (out / ".mobisense.lock").exists() and time.monotonic() < deadline:
         time.sleep(0.05)
-    second = attack("solve", kind.command(path, out), tmp_path, 2, ("in use by another mobisense run",), None)
+    second = attack("solve", kind.command(path, out), tmp_path, 2, ("in use by another mobisense run",), None,
+                    others=(out / ".mobisense.lock",))
     code, _, err, _ = finish(first, 120)
     assert second.verdict in GOOD, second.problems
     assert code == 0, err
