@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from ...core.errors import ConfigError
+from ...core.interrupts import deferred_interrupts
 from .cluster import CONNECT_TIMEOUT
 from .worker import solve_task
 
@@ -41,7 +42,7 @@ def open_client(scheduler: str | None, workers: int | None, security: Any = None
     if scheduler:
         try:
             _probe(scheduler)
-            with _deferred_interrupts() as deferred:
+            with deferred_interrupts(raise_at_exit=False) as deferred:
                 client = Client(scheduler, timeout=CONNECT_TIMEOUT, security=security)
         except (OSError, TimeoutError, ValueError, TypeError, MemoryError) as exc:
             reason = " ".join(str(exc).split())[:160] or type(exc).__name__
@@ -60,7 +61,7 @@ def open_client(scheduler: str | None, workers: int | None, security: Any = None
     # per-factorisation workspaces then go through mmap/munmap and page faults. Unset it for our workers.
     with (
         dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}),
-        _deferred_interrupts() as deferred,
+        deferred_interrupts(raise_at_exit=False) as deferred,
     ):
         cluster = LocalCluster(
             n_workers=n,
@@ -78,42 +79,6 @@ def open_client(scheduler: str | None, workers: int | None, security: Any = None
     with cluster, client:
         deferred.check()  # Ctrl-C or SIGTERM during the start: stop now, closing the cluster cleanly
         yield client
-
-
-class _Deferred:
-    """Interrupts received while a cluster starts, raised once it can be closed cleanly."""
-
-    def __init__(self) -> None:
-        self.received: int | None = None
-
-    def check(self) -> None:
-        if self.received is not None:
-            raise KeyboardInterrupt
-
-
-@contextlib.contextmanager
-def _deferred_interrupts() -> Iterator[_Deferred]:
-    """Hold SIGINT and SIGTERM while dask starts; :meth:`_Deferred.check` raises the interrupt afterwards.
-
-    An exception inside dask's start leaves threads and clusters that print tracebacks at exit.
-    """
-    import signal
-    import threading
-
-    deferred = _Deferred()
-    if threading.current_thread() is not threading.main_thread():
-        yield deferred
-        return
-
-    def hold(signum: int, frame: Any) -> None:
-        deferred.received = signum
-
-    previous = {sig: signal.signal(sig, hold) for sig in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield deferred
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
 
 
 def _probe(address: str) -> None:

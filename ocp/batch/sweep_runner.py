@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from ...core.files import write_json, write_netcdf
+from ...core.interrupts import deferred_interrupts
 from .sweep import expand_sweep, load_sweep
 from .sweep_report import SweepProgress, sweep_summary
 
@@ -145,10 +146,11 @@ def run_sweep(
             row = {"task": task.task, "index": task.index, **task.values}
             row.update({c: None for c in RESULT_COLUMNS})
             row.update(result["row"])
-            if "dataset" in result:
-                write_netcdf(out / "tasks" / f"{task.index:04d}_{task.task}" / "solution.nc", result["dataset"])
-            rows[task.task] = row
-            batch.add(row, last=len(rows) == len(tasks))
+            with deferred_interrupts():  # a task's solution file and its row: both or neither
+                if "dataset" in result:
+                    write_netcdf(out / "tasks" / f"{task.index:04d}_{task.task}" / "solution.nc", result["dataset"])
+                rows[task.task] = row
+                batch.add(row, last=len(rows) == len(tasks))
             progress.advance(row)
 
         connection = open_client(scheduler, min(local, len(todo)) or None, security) if todo else nullcontext()
