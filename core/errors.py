@@ -80,7 +80,8 @@ def _describe(exc: BaseException) -> str:
     # CasADi errors end with the useful sentence after a long C++ stack of ".../file.cpp:123:" lines
     useful = [line for line in lines if ".cpp:" not in line and not line.startswith(("Error in", "at "))]
     text = (useful or lines or [type(exc).__name__])[-1]
-    return one_line(f"{type(exc).__name__}: {text}" if type(exc).__name__ not in text else text)
+    plain = isinstance(exc, RuntimeError) or type(exc).__name__ in text  # our own and CasADi's need no type
+    return one_line(text if plain else f"{type(exc).__name__}: {text}")
 
 
 @contextmanager

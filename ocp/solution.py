@@ -355,7 +355,7 @@ class Solution:
         """
         times = np.atleast_1d(np.asarray(t, dtype=float))
         t0, tf = float(self.t[0]), float(self.t[-1])
-        tol = 1e-12 * max(1.0, abs(tf - t0))
+        tol = 1e-12 * abs(tf - t0) + 8 * np.finfo(float).eps * max(abs(t0), abs(tf))
         if times.size and (times.min() < t0 - tol or times.max() > tf + tol):
             raise ValueError(f"t: expected times in [{t0:g}, {tf:g}], got [{times.min():g}, {times.max():g}]")
         times = np.clip(times, t0, tf)
@@ -382,7 +382,7 @@ class Solution:
         k = np.clip(np.ceil(scaled - 1e-9).astype(int) - 1, 0, K - 1)
         s = scaled - k
         node_times = t0 + h * (np.arange(K)[:, None] + colloc.tau[None, :])  # (K, d+1)
-        tol = 1e-9 * max(1.0, abs(tf - t0))
+        tol = 1e-9 * abs(tf - t0) / K + 8 * np.finfo(float).eps * max(abs(t0), abs(tf))
         index = np.clip(np.searchsorted(self.t, node_times - tol), 0, len(self.t) - 1)
         basis = colloc.interpolation_matrix(s, "all")  # (T, d+1)
         x_t = np.einsum("tj,tjx->tx", basis, x[index[k]])

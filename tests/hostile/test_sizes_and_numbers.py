@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from hostile.harness import GOOD, attack
+from hostile.harness import EITHER, GOOD, attack
 from hostile.inputs import KINDS, small_problem
 
 pytestmark = pytest.mark.slow  # each case starts a Python process (~1 s)
@@ -263,3 +263,37 @@ def test_replay_of_a_netcdf_that_is_not_a_solution(tmp_path):
     outcome = attack("replay", kind.command(path, out), tmp_path, 2, ("grid.nc", "not a solution"), out)
     assert outcome.verdict in GOOD, outcome.problems
 
+
+
+#: valid problems with extreme numbers (within the magnitude bounds): solved, or a clean numerical failure
+EXTREMES = {
+    "Sigma0 1e100": ("process.Sigma0", [[1e100]]),
+    "A 1e50 (unstable)": ("process.A", [[1e50]]),
+    "A -1e50 (stiff)": ("process.A", [[-1e50]]),
+    "Q 1e100": ("process.Q", [[1e100]]),
+    "M 1e100": ("cost.M", [[1e100]]),
+    "alpha 1e-100": ("cost.alpha", 1e-100),
+    "alpha 1e100": ("cost.alpha", 1e100),
+    "tf 1e-12": ("horizon.tf", 1e-12),
+    "tf 1e-30": ("horizon.tf", 1e-30),
+    "tf 1e100": ("horizon.tf", 1e100),
+    "noise 1e-100": ("sensors.0.noise", {"model": "quadratic_range", "beta": 1e-100, "gamma": 1e-100}),
+    "noise 1e100": ("sensors.0.noise", {"model": "quadratic_range", "beta": 1e100, "gamma": 1e100}),
+    "p0 1e50": ("sensors.0.p0", [1e50, 1e50]),
+    "v0 1e50": ("sensors.0.v0", [1e50, 0.0]),
+}
+
+
+@pytest.mark.parametrize("name", list(EXTREMES))
+def test_extreme_valid_numbers_are_solved_or_fail_cleanly(tmp_path, name):
+    key, value = EXTREMES[name]
+    kind = KINDS["solve"]
+    data = small_problem()
+    _set(key, value)(data)
+    path = kind.write(tmp_path, data)
+    out = tmp_path / "result"
+    outcome = attack("solve", kind.command(path, out), tmp_path, EITHER, (), out)
+    assert outcome.verdict in GOOD, outcome.problems
+    if outcome.code == 0:  # an optimum is a number, and never worse than not moving
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["status"] == "solved" and np.isfinite(summary["cost"]) and not summary["worse_than_baseline"]
