@@ -90,6 +90,10 @@ def _main(argv: Sequence[str] | None, said: list[str]) -> int:
     except SystemExit as exit_:  # --help, --version, usage errors: argparse has printed what to say
         return exit_.code if isinstance(exit_.code, int) else 2
     previous = signal.signal(signal.SIGTERM, _terminate) if _main_thread() else None
+    import numpy as np
+
+    # overflow/invalid-value warnings of intermediate steps are not messages: results are checked for NaN/inf
+    errors = np.seterr(all="ignore")
     try:
         return int(args.run(args) or 0)
     except ConfigError as err:
@@ -112,6 +116,7 @@ def _main(argv: Sequence[str] | None, said: list[str]) -> int:
              "the input; MOBISENSE_TRACEBACK=1 shows the traceback)")  # fmt: skip
         return 3
     finally:
+        np.seterr(**errors)
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
 
