@@ -297,3 +297,42 @@ def test_extreme_valid_numbers_are_solved_or_fail_cleanly(tmp_path, name):
     if outcome.code == 0:  # an optimum is a number, and never worse than not moving
         summary = json.loads((out / "summary.json").read_text())
         assert summary["status"] == "solved" and np.isfinite(summary["cost"]) and not summary["worse_than_baseline"]
+
+
+#: valid scenarios with extreme numbers: simulated, a clean failure (exit 1), or refused as too long (exit 2)
+SIMULATION_EXTREMES = {
+    "leader speed 1e50": ("simulate leader-follower", "leader.speed", 1e50, 2),
+    "leader gain 1e50": ("simulate leader-follower", "gain", 1e50, 2),
+    "leader turn rate 1e50": ("simulate leader-follower", "leader.turn_rate", 1e50, 2),
+    "follower 1e90 away": ("simulate leader-follower", "followers.0.pose", [1e90, 1e90, 0.0], 2),
+    "reference distance 1e-90": ("simulate leader-follower", "reference.distance", 1e-90, 2),
+    "leader speed 1e4": ("simulate leader-follower", "leader.speed", 1e4, EITHER),
+    "diffusivity 1e50": ("simulate distributed", "field.diffusivity", 1e50, EITHER),
+    "field amplitude 1e-100": ("simulate distributed", "field.amplitude", 1e-100, EITHER),
+    "field velocity 1e50": ("simulate distributed", "field.velocity", [1e50, 0.0], EITHER),
+    "snr 1e-100": ("simulate distributed", "noise.snr", 1e-100, EITHER),
+    "wavenumber 1e50": ("simulate distributed", "field.wavenumber", 1e50, EITHER),
+    "platform max speed 1e100": ("replay", "platforms.max_speed", 1e100, EITHER),
+    "centre at 1e90": ("replay", "platforms.initial.center", [1e90, 1e90], EITHER),
+    "process noise 1e-100": ("replay", "filter.noise.sigma_process", 1e-100, EITHER),
+    "measurement noise 1e100": ("replay", "filter.noise.sigma_measurement", 1e100, EITHER),
+    "level 1e90": ("replay", "motion.level", 1e90, EITHER),
+    "angular speed 1e50": ("replay", "formation.angular_speed", 1e50, EITHER),
+    "sigma_process 1e-100": ("steady-state", "noise.sigma_process", 1e-100, EITHER),
+    "sigma_measurement 1e-100": ("steady-state", "noise.sigma_measurement", 1e-100, EITHER),
+    "sigma_hessian 1e100": ("steady-state", "noise.sigma_hessian", 1e100, EITHER),
+    "bounds [1e-90, 1e90]": ("steady-state", "bounds.a", [1e-90, 1e90], 2),
+}
+
+
+@pytest.mark.parametrize("name", list(SIMULATION_EXTREMES))
+def test_extreme_valid_scenarios_run_fail_cleanly_or_are_refused(tmp_path, name):
+    kind_name, key, value, expect = SIMULATION_EXTREMES[name]
+    kind = KINDS[kind_name]
+    data = kind.data()
+    _set(key, value)(data)
+    path = kind.write(tmp_path, data)
+    out = tmp_path / "result"
+    mentions = ("input.yaml", "too") if expect == 2 and kind_name != "steady-state" else ()
+    outcome = attack(kind.name, kind.command(path, out), tmp_path, expect, mentions, out)
+    assert outcome.verdict in GOOD, outcome.problems
