@@ -42,6 +42,12 @@ class Scenario:
     config: Any
     source: Path
 
+    def estimates(self) -> list[Any]:
+        """Memory and time of :meth:`run` (:class:`mobisense.core.budget.Estimate` items) from the sizes."""
+        from .sizes import scenario_estimates
+
+        return scenario_estimates(self.kind, self.config, self.source)
+
     def run(self, seed: int | None = None, progress: bool = False, animate: bool = False) -> SimulationResult:
         """Simulate the scenario.
 
@@ -82,6 +88,10 @@ def replay_kind(data: Any, source: Path) -> str:
     """``field_replay`` or ``plan_replay`` from the keys of a replay file; ``ConfigError`` if neither."""
     from ..core.config import ConfigError
 
+    if data is None:
+        raise ConfigError(f"{source}: (top level): the file is empty; expected a mapping of keys")
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: (top level): expected a mapping of keys (a field replay or a plan replay)")
     if isinstance(data, dict) and "field" in data:
         return "field_replay"
     if isinstance(data, dict) and "solution" in data:

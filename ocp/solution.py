@@ -18,8 +18,11 @@ from typing import Any
 import numpy as np
 import yaml
 
+from ..core.errors import ConfigError
 from ..core.files import to_jsonable, write_json, write_netcdf
+from ..core.reader import parse_document
 from .problem import Problem
+from .solution_file import brief_error, open_solution_file, read_solution_problem
 from .state_layout import StateLayout
 
 __all__ = ["SolveStatus", "StartKind", "HomotopyStep", "TrajectorySample", "Solution"]
@@ -215,6 +218,30 @@ class Solution:
         """Smallest eigenvalue of Σ(t) over the state grid (must be > 0)."""
         return float(np.linalg.eigvalsh(self.Sigma).min())
 
+    def non_finite(self) -> str | None:
+        """What is NaN or infinite in the solution (cost, Σ, p, v, u), or ``None`` if everything is finite."""
+        for name in ("terminal_cost", "running_cost", "control_energy"):
+            if not np.isfinite(getattr(self, name)):
+                return f"the {name.replace('_', ' ')} is {getattr(self, name)}"
+        for name in ("Sigma", "p", "v", "u"):
+            values = np.asarray(getattr(self, name))
+            if not np.all(np.isfinite(values)):
+                return f"{name} has {int(np.size(values) - np.isfinite(values).sum())} NaN or infinite values"
+        return None
+
+    def reject_non_finite(self) -> None:
+        """Mark a solve that produced NaN/inf as failed (an "optimum" that is not a number is not one)."""
+        problem = self.non_finite()
+        if problem is not None and self.success:
+            self.status = SolveStatus.FAILED
+            self.message = f"non-finite solution at ε = {self.eps:g}: {problem}"
+
+    @property
+    def worse_than_baseline(self) -> bool:
+        """True when a converged solve costs more than not moving (u ≡ 0): a poor local optimum."""
+        base = self.baseline.get("cost")
+        return bool(self.success and base is not None and np.isfinite(base) and self.cost > base * (1 + 1e-6))
+
     def summary(self) -> dict[str, Any]:
         """The ``summary.json`` contract (see README)."""
         base = self.baseline.get("cost")
@@ -239,7 +266,13 @@ class Solution:
             "sigma_positive_definite": self.min_sigma_eigenvalue > 0,
             "problem_hash": self.problem.digest(),
             "solver": self.problem.solver.model_dump(mode="json"),
+            "worse_than_baseline": self.worse_than_baseline,
         }
+        if self.worse_than_baseline:
+            out["warning"] = (
+                f"the optimum found (J = {self.cost:.6g}) costs more than not moving (no-control baseline "
+                f"J = {base:.6g}): a poor local optimum; try --multistart K"
+            )
         out.update(self.stats)
         return to_jsonable(out)
 
@@ -322,7 +355,7 @@ class Solution:
         """
         times = np.atleast_1d(np.asarray(t, dtype=float))
         t0, tf = float(self.t[0]), float(self.t[-1])
-        tol = 1e-12 * max(1.0, abs(tf - t0))
+        tol = 1e-12 * abs(tf - t0) + 8 * np.finfo(float).eps * max(abs(t0), abs(tf))
         if times.size and (times.min() < t0 - tol or times.max() > tf + tol):
             raise ValueError(f"t: expected times in [{t0:g}, {tf:g}], got [{times.min():g}, {times.max():g}]")
         times = np.clip(times, t0, tf)
@@ -349,7 +382,7 @@ class Solution:
         k = np.clip(np.ceil(scaled - 1e-9).astype(int) - 1, 0, K - 1)
         s = scaled - k
         node_times = t0 + h * (np.arange(K)[:, None] + colloc.tau[None, :])  # (K, d+1)
-        tol = 1e-9 * max(1.0, abs(tf - t0))
+        tol = 1e-9 * abs(tf - t0) / K + 8 * np.finfo(float).eps * max(abs(t0), abs(tf))
         index = np.clip(np.searchsorted(self.t, node_times - tol), 0, len(self.t) - 1)
         basis = colloc.interpolation_matrix(s, "all")  # (T, d+1)
         x_t = np.einsum("tj,tjx->tx", basis, x[index[k]])
@@ -387,7 +420,9 @@ class Solution:
     def from_dataset(cls, ds: Any) -> Solution:
         """Rebuild a Solution from :meth:`to_dataset` output."""
         a = ds.attrs
-        problem = Problem.from_dict(yaml.safe_load(a["problem_yaml"]), source="solution.nc:problem_yaml")
+        problem = Problem.from_dict(
+            parse_document(str(a["problem_yaml"]), "solution.nc:problem_yaml"), source="solution.nc:problem_yaml"
+        )
         has_costates = "Lam" in ds
         has_path = "path_eps" in ds
         return cls(
@@ -431,11 +466,16 @@ class Solution:
 
     @classmethod
     def load(cls, path: str | Path) -> Solution:
-        """Load ``solution.nc`` (or a folder containing it)."""
-        import xarray as xr
+        """Load ``solution.nc`` (or a folder containing it); ``ConfigError`` (one line) if it is not one."""
+        with open_solution_file(path) as (ds, where):
+            try:
+                return cls.from_dataset(ds.load())
+            except ConfigError as exc:
+                raise ConfigError(f"{where}: {str(exc).split(': ', 1)[-1]}") from None
+            except (KeyError, ValueError, TypeError, IndexError, AttributeError, OSError, MemoryError) as exc:
+                raise ConfigError(f"{where}: not a solution written by mobisense solve ({brief_error(exc)})") from None
 
-        path = Path(path)
-        if path.is_dir():
-            path = path / "solution.nc"
-        with xr.open_dataset(path, engine="h5netcdf") as ds:
-            return cls.from_dataset(ds.load())
+    @staticmethod
+    def read_problem(path: str | Path) -> Problem:
+        """The problem stored in a ``solution.nc`` without loading its arrays (``ConfigError`` if unreadable)."""
+        return read_solution_problem(path)
