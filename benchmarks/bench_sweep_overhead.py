@@ -4,7 +4,7 @@
 
 The 40 tasks of ``bench_sweep.py`` (8 α × 5 start positions of the default problem, K = 60) as a sweep file,
 run by :func:`mobisense.ocp.batch.run_sweep` on a LocalCluster (warm starts from the nearest finished task,
-solution files written by the workers, rows appended in batches), against the same work serially in this
+solution files written by the client, rows appended in batches), against the same work serially in this
 process: each task warm-started from the nearest finished one, solved and its solution file written.
 
 Targets (issue 14): a warm-started sweep ≥ 1.6× serial on 2 workers (cluster start-up excluded, printed
@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from mobisense.core.files import write_netcdf
 from mobisense.ocp.batch import nearest_seed, open_client, run_sweep, solve_task
 
 ALPHAS = [float(a) for a in np.geomspace(0.001, 0.02, 8)]
@@ -61,7 +62,8 @@ def serial(folder: Path) -> tuple[float, list[dict]]:
     t0 = time.perf_counter()
     for i, (data, coords) in enumerate(items):
         seed = nearest_seed(seeds, None, coords)
-        result = solve_task({"problem": data, "seed": seed, "write_to": str(folder / f"{i:04d}" / "solution.nc")})
+        result = solve_task({"problem": data, "seed": seed})
+        write_netcdf(folder / f"{i:04d}" / "solution.nc", result["dataset"])
         if result["nlp"] is not None:
             seeds.append((None, coords, result["nlp"]))
         rows.append(result["row"])

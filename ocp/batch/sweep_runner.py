@@ -7,7 +7,6 @@ number of tasks (before expanding them), the memory budget, every task's problem
 
 from __future__ import annotations
 
-import shutil
 import time
 from contextlib import nullcontext
 from dataclasses import dataclass
@@ -36,8 +35,6 @@ RESULT_COLUMNS = [
     "start",
     "transcription_cached",
 ]
-#: folder (in the result folder) where local workers write solution files until the client records their rows
-STAGED = ".staging"
 #: task statuses that are final (not re-run on resume)
 DONE = ("solved", "failed")
 #: finished rows are appended to results.parquet in batches of at most this many rows …
@@ -85,9 +82,7 @@ def run_sweep(
     out : str or Path
         Result folder: ``results.parquet`` (a folder of parquet fragments, one appended per batch of finished
         tasks, so an interrupted sweep resumes), ``sweep.json`` (which sweep made the folder),
-        ``tasks/<index>_<task>/solution.nc`` and ``summary.json``. Local workers write the solution files
-        themselves (into ``.staging/``, moved into ``tasks/`` when the task's row is recorded); with a
-        ``scheduler`` the client writes them (its workers need not see this file system).
+        ``tasks/<index>_<task>/solution.nc`` and ``summary.json``.
     scheduler : str, optional
         Address of a running dask scheduler (with dask ``security``); default a local cluster of ``workers``
         processes.
@@ -144,16 +139,7 @@ def run_sweep(
         rows = {t: r for t, r in previous.items() if r["status"] in DONE}
         todo = [t for t in tasks if t.task not in rows]
         batch = _Batch(store)
-        shutil.rmtree(out / STAGED, ignore_errors=True)  # left by an interrupted run: its tasks are re-run
         progress = SweepProgress(len(tasks), len(tasks) - len(todo), quiet=quiet)
-
-        def task_folder(task: Any) -> Path:
-            return out / "tasks" / f"{task.index:04d}_{task.task}"
-
-        def payload(task: Any) -> dict[str, Any]:
-            # local workers share this file system: they write (stage) the solution file themselves
-            staged = out / STAGED / f"{task.index:04d}_{task.task}.nc"
-            return {"problem": task.problem, "write_to": None if scheduler else str(staged)}
 
         def on_result(i: int, result: dict[str, Any]) -> None:
             task = todo[i]
@@ -161,11 +147,8 @@ def run_sweep(
             row.update({c: None for c in RESULT_COLUMNS})
             row.update(result["row"])
             with deferred_interrupts():  # a task's solution file and its row: both or neither
-                if "written" in result:
-                    task_folder(task).mkdir(parents=True, exist_ok=True)
-                    os.replace(result["written"], task_folder(task) / "solution.nc")
-                elif "dataset" in result:
-                    write_netcdf(task_folder(task) / "solution.nc", result["dataset"])
+                if "dataset" in result:
+                    write_netcdf(out / "tasks" / f"{task.index:04d}_{task.task}" / "solution.nc", result["dataset"])
                 rows[task.task] = row
                 batch.add(row, last=len(rows) == len(tasks))
             progress.advance(row)
@@ -179,7 +162,7 @@ def run_sweep(
                     if todo:
                         run_tasks(
                             client,
-                            [payload(t) for t in todo],
+                            [{"problem": t.problem} for t in todo],
                             on_result,
                             [t.structure for t in todo],
                             [t.coordinates() for t in todo],
@@ -188,7 +171,6 @@ def run_sweep(
             finally:
                 batch.flush()  # rows of finished tasks are kept however the run ends
         store.compact()
-        shutil.rmtree(out / STAGED, ignore_errors=True)  # empty unless a task was written but not recorded
         summary = sweep_summary(spec, tasks, list(rows.values()), resumed=len(tasks) - len(todo))
         write_json(out / "summary.json", summary)
         progress.report(summary, out)

@@ -1,11 +1,8 @@
 """The worker side of a batch: solve one task given as plain data, return plain data.
 
-A task is ``{problem: dict, seed: NLP point or None, guess_seed: int or None, write_to: path or None}``; the
-worker builds (or reuses, per process) the transcription of the problem's structure and returns the result
-row, the solution and the converged NLP point (to warm-start neighbours). The solution is returned as an
-``xarray.Dataset``, or, with ``write_to`` (workers that share the client's file system), written there by
-the worker (atomically) and returned as that path: the netCDF write is most of a warm task's cost, and in
-the client it would run serially for all workers.
+A task is ``{problem: dict, seed: NLP point or None, guess_seed: int or None}``; the worker builds (or
+reuses, per process) the transcription of the problem's structure and returns the result row, the
+solution as an ``xarray.Dataset`` and the converged NLP point (to warm-start neighbours).
 """
 
 from __future__ import annotations
@@ -17,11 +14,7 @@ __all__ = ["solve_task", "worker_name", "dask_setup"]
 
 
 def solve_task(payload: dict[str, Any]) -> dict[str, Any]:
-    """Worker side: solve one task. ``payload`` = {problem, seed (NLP point or None), guess_seed (int|None), write_to}.
-
-    Returns ``{row, nlp}`` and ``dataset`` (an ``xarray.Dataset``) or, with ``write_to``, ``written`` (the path of
-    the solution file the worker wrote).
-    """
+    """Worker side: solve one task. ``payload`` = {problem, seed (NLP point or None), guess_seed (int|None)}."""
     from ..direct.solver import solve_direct
     from ..direct.transcription import transcription_cache_hits
     from ..problem import Problem
@@ -51,15 +44,7 @@ def solve_task(payload: dict[str, Any]) -> dict[str, Any]:
         "start": StartKind(solution.stats.get("start", StartKind.CONTINUATION)).value,
         "transcription_cached": cached,
     }
-    result = {"row": row, "nlp": solution.nlp if solution.success else None}
-    if payload.get("write_to"):
-        from ...core.files import write_netcdf
-
-        write_netcdf(payload["write_to"], solution.to_dataset())
-        result["written"] = payload["write_to"]
-    else:
-        result["dataset"] = solution.to_dataset()
-    return result
+    return {"row": row, "dataset": solution.to_dataset(), "nlp": solution.nlp if solution.success else None}
 
 
 def worker_name() -> str:
