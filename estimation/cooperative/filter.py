@@ -36,6 +36,7 @@ Example
 from __future__ import annotations
 
 import functools
+import os
 from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
@@ -316,12 +317,25 @@ def _rollout_body() -> Any:
         Ps.append(Pk)
     inputs, outputs = [x, P, dr, u, J, j, M], [xk, Pk, ca.horzcat(*xs), ca.horzcat(*Ps)]
     if shutil.which("gcc") or shutil.which("cc"):
-        options = {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O2"], "verbose": False}}
+        jit_options = {"flags": ["-O2"], "verbose": False, "directory": _jit_directory()}
+        options = {"jit": True, "compiler": "shell", "jit_options": jit_options}
         try:
             return ca.Function("cooperative_steps", inputs, outputs, options)
         except RuntimeError:  # compiler present but unusable: fall back to the virtual machine
             pass
     return ca.Function("cooperative_steps", inputs, outputs)
+
+
+@functools.lru_cache(maxsize=1)
+def _jit_directory() -> str:
+    """A private temporary directory for CasADi's JIT sources and objects, removed when the process exits."""
+    import atexit
+    import shutil
+    import tempfile
+
+    folder = tempfile.mkdtemp(prefix="mobisense-jit-")
+    atexit.register(shutil.rmtree, folder, ignore_errors=True)
+    return folder + os.sep
 
 
 @functools.lru_cache(maxsize=16)

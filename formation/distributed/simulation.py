@@ -115,6 +115,7 @@ class OutputSpec(StrictModel):
 class DistributedScenario(StrictModel):
     """A ``mobisense simulate distributed`` scenario file."""
 
+    kind: Literal["distributed"] | None = Field(None, description="file kind (optional: 'network' tells it)")
     name: str = "distributed"
     seed: int = 0
     time: TimeGrid = TimeGrid()
@@ -254,10 +255,17 @@ def simulate(scenario: DistributedScenario, seed: int | None = None, progress: b
             "runtime_s": runtime,
         },
     )
-    ds["time"].attrs["units"] = "s"
+    ds.attrs["title"] = f"mobisense: distributed-filter simulation '{scenario.name}'"
     for name, description in _DESCRIPTIONS.items():
-        ds[name].attrs["long_name"] = description
+        ds[name].attrs.update(long_name=description, units=_UNITS.get(name, "1"))
     return ds
+
+
+#: units of the variables and coordinates (lengths in m, time in s, the field's values dimensionless)
+_UNITS = {
+    "time": "s", "gradient_true": "m-1", "gradient_unconstrained": "m-1", "gradient_constrained": "m-1",
+    "centre": "m", "sensor_position": "m", "distance": "m", "desired_distance": "m",
+}  # fmt: skip
 
 
 _DESCRIPTIONS = {
@@ -275,6 +283,9 @@ _DESCRIPTIONS = {
     "desired_distance": "desired distance of the link (Zhang et al. (2023), eq. 39, times its shape ratio)",
     "link_sensors": "the two sensors of each intra-cell link",
     "cell_sensors": "sensors at the cell's vertices, counter-clockwise, -1 padded",
+    "time": "time of the samples",
+    "cell": "cell number",
+    "sensor": "sensor number",
 }
 
 
@@ -409,11 +420,14 @@ class DistributedResult(SimulationResult):
         """The per-cell error table (the paper's Table 1) and where the files went."""
         s = self.summary
         print(f"{s['scenario']}: {s['steps']} steps, noise σ = {s['noise_std']:.4g}, seed {s['seed']}")
-        print(f"{'cell':>4} {'mean_n':>9} {'mean_u':>9} {'mean_c':>9} {'std_n':>8} {'std_u':>8} {'std_c':>8}")
+        print("errors of the field value at each cell centre (estimate − truth): mean and standard deviation of")
+        print("  the cell's averaged measurements, the unconstrained filter and the PDE-constrained filter")
+        print(f"{'cell':>4} {'mean:':>6}{'meas.':>7} {'uncons.':>9} {'constr.':>9}  {'std:':>5}{'meas.':>6} "
+              f"{'uncons.':>8} {'constr.':>8}")  # fmt: skip
         for row in s["error_table"]:
             print(
-                f"{row['cell']:>4} {row['mean_noise']:>9.4f} {row['mean_unconstrained']:>9.4f} "
-                f"{row['mean_constrained']:>9.4f} {row['std_noise']:>8.4f} {row['std_unconstrained']:>8.4f} "
+                f"{row['cell']:>4} {row['mean_noise']:>13.4f} {row['mean_unconstrained']:>9.4f} "
+                f"{row['mean_constrained']:>9.4f} {row['std_noise']:>12.4f} {row['std_unconstrained']:>8.4f} "
                 f"{row['std_constrained']:>8.4f}"
             )
         better = s["cells_with_lower_constrained_std"]
