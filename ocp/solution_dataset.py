@@ -11,15 +11,12 @@ from __future__ import annotations
 
 import json
 from dataclasses import asdict
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import yaml
 
 from ..core.files import to_jsonable
-
-if TYPE_CHECKING:
-    from .solution import Solution
 
 __all__ = ["VARIABLES", "COORDINATES", "solution_dataset", "solution_fields", "variable_attrs"]
 
@@ -56,13 +53,13 @@ COORDINATES: dict[str, tuple[str, dict[str, int]]] = {
 _NLP_DIMS = {"w": "nlp_variable", "lam_w": "nlp_variable", "lam_g": "nlp_constraint", "P": "nlp_parameter"}
 
 
-def variable_attrs(solution: Solution, name: str, suffix: str = "") -> dict[str, str]:
-    """``long_name`` and ``units`` of variable or coordinate ``name`` in the units of the solution's problem."""
+def variable_attrs(solution: Any, name: str, suffix: str = "") -> dict[str, str]:
+    """``long_name`` and ``units`` of variable or coordinate ``name`` in the units of a Solution's problem."""
     long_name, powers = {**VARIABLES, **COORDINATES}[name]
     return {"long_name": long_name + suffix, "units": solution.problem.units.system().of(**powers)}
 
 
-def solution_dataset(solution: Solution) -> Any:
+def solution_dataset(solution: Any) -> Any:
     """The solution as an ``xarray.Dataset`` (what ``solution.nc`` holds, see the module notes)."""
     import xarray as xr
 

@@ -38,6 +38,7 @@ from __future__ import annotations
 import functools
 import os
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Literal, Protocol
 
 import numpy as np
@@ -328,14 +329,17 @@ def _rollout_body() -> Any:
 
 @functools.lru_cache(maxsize=1)
 def _jit_directory() -> str:
-    """A private temporary directory for CasADi's JIT sources and objects, removed when the process exits."""
-    import atexit
-    import shutil
+    """The user's private folder for CasADi's JIT sources and objects (never the working directory).
+
+    CasADi deletes its files when the compiled function is released; only a killed process leaves some,
+    in the system's temporary folder rather than in the user's project.
+    """
+    import getpass
     import tempfile
 
-    folder = tempfile.mkdtemp(prefix="mobisense-jit-")
-    atexit.register(shutil.rmtree, folder, ignore_errors=True)
-    return folder + os.sep
+    folder = Path(tempfile.gettempdir()) / f"mobisense-jit-{getpass.getuser()}"
+    folder.mkdir(mode=0o700, exist_ok=True)
+    return str(folder) + os.sep
 
 
 @functools.lru_cache(maxsize=16)
