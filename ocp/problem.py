@@ -329,5 +329,10 @@ class Problem(StrictModel):
 
 
 def load_problem(path: str | Path) -> Problem:
-    """Read and validate a problem YAML file; raises :class:`mobisense.core.config.ConfigError` (one line)."""
-    return load_config(path, Problem)
+    """Read and validate a problem YAML file, or a shipped example by name (``load_problem("hussein2008")``).
+
+    Raises :class:`mobisense.core.config.ConfigError` (one line naming the file and the key path).
+    """
+    from ..core.examples import resolve_input
+
+    return load_config(resolve_input(path), Problem)
