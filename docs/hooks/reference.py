@@ -198,6 +198,29 @@ def _example_outputs(folder: Path) -> dict[str, tuple[Path, str]]:
     return out
 
 
+#: global attribute -> meaning (the output reference lists these for every file that has them)
+ATTRIBUTES = {
+    "Conventions": "`CF-1.10`", "title": "what the file holds", "history": "UTC time, command line and version",
+    "source": "mobisense and its version", "comment": "conventions of the data (matrix storage, units)",
+    "nlp_signature": "structure of the NLP the warm-start point belongs to",
+    "problem_yaml": "the normalised problem, every default filled in", "solver_options_json": "the solver options",
+    "summary_json": "summary.json", "homotopy_json": "every ε step (ε, J_ε, iterations, status, time)",
+    "baseline_json": "the no-control baseline's cost split", "stats_json": "solver statistics",
+    "method": "direct, indirect or both", "status": "solved / failed (or ok / what stopped a simulation)",
+    "message": "the solver's final message", "eps": "the ε of the stored states (1 when solved)",
+    "collocation_json": "scheme, degree, intervals of the collocation polynomials",
+    "terminal_cost": "Tr[M Σ(tf)]", "running_cost": "∫ (α/2 |u|² + Tr KΣ) dt", "control_energy": "∫ α/2 |u|² dt",
+    "band_low": "lower end of the χ² band of the average NEES", "band_high": "upper end of that band",
+    "runs": "Monte Carlo runs", "confidence": "confidence of the band", "time_step": "sampling period of the filter",
+    "problem": "name of the replayed problem", "length_unit": "declared length unit", "time_unit": "declared time unit",
+    "field_unit": "declared unit of the field", "C": "tracked level (NaN for reference motion)",
+    "scenario": "scenario name", "seed": "random seed", "field": "the field", "formation": "formation kind",
+    "motion": "motion of the centre", "gain": "control gain k (1/s)", "noise_std": "measurement noise σ",
+    "snr": "signal-to-noise ratio", "projection": "metric of the constraint projection",
+    "runtime_s": "wall time of the simulation (s)",
+}  # fmt: skip
+
+
 def _dataset_tables(path: Path) -> list[str]:
     import xarray as xr
 
@@ -208,9 +231,12 @@ def _dataset_tables(path: Path) -> list[str]:
             for name in names:
                 var = ds[name]
                 role = " (coordinate)" if kind == "coordinate" else ""
+                units = f"`{var.attrs['units']}`" if "units" in var.attrs else "— (names)"
                 lines.append(f"| `{name}`{role} | {', '.join(var.dims)} | {_cell(var.attrs.get('long_name', ''))} | "
-                             f"`{var.attrs.get('units', '')}` |")  # fmt: skip
-        lines += ["", "Global attributes: " + ", ".join(f"`{k}`" for k in ds.attrs) + ".", ""]
+                             f"{units} |")  # fmt: skip
+        lines += ["", "| global attribute | meaning |", "|---|---|"]
+        lines += [f"| `{k}` | {_cell(ATTRIBUTES.get(k, ''))} |" for k in ds.attrs]
+        lines.append("")
     return lines
 
 

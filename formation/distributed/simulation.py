@@ -413,7 +413,8 @@ class DistributedResult(SimulationResult):
         folder = Path(folder)
         field = self.scenario.field.build()
         write_figure(folder / "paths.png", lambda: plot_paths(self.dataset, field))
-        write_figure(folder / "estimates.png", lambda: plot_estimates(self.dataset, self.scenario.output.plot_cells))
+        cells = self.scenario.output.plot_cells
+        write_figure(folder / "estimates.png", lambda: plot_estimates(self.dataset, cells, "dimensionless"))
         return [folder / "paths.png", folder / "estimates.png"]
 
     def report(self, folder: Path) -> None:

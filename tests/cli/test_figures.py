@@ -72,6 +72,7 @@ def _clean(found: dict[str, list[str]], expected: set[str]) -> None:
     assert not bad, "\n".join(f"{n}: {p}" for n, ps in bad.items() for p in ps)
 
 
+@pytest.mark.slow
 def test_sweep_figures_a_line_for_one_key_a_heat_map_for_two(checked, tmp_path):
     from mobisense.ocp.batch.sweep_plots import plot_sweep, save_sweep_figures
     from mobisense.ocp.batch.sweep_runner import SweepResult
