@@ -58,7 +58,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exit_:  # --help, --version, usage errors: argparse has printed what to say
+        return exit_.code if isinstance(exit_.code, int) else 2
     try:
         with recorded_command(argv):  # the "history" of every netCDF file written
             return int(args.run(args) or 0)
