@@ -7,7 +7,7 @@
 * legend entries whose artist shows nothing: a line or marker with data but no finite point inside the
   axes limits (an empty line is a legend proxy for a contour or collection), or one entirely covered by
   an artist drawn over it (a later solid, mostly opaque line at least as wide passing within half its
-  width of every point, or a later filled marker at least as large at the same place).
+  width of every point, or a later filled marker at least half as large at the same place).
 
 Distances are measured in display pixels after drawing, so a curve hidden under another curve of the
 same data is found whatever the data's scale.
@@ -64,7 +64,7 @@ def _covered(line: Any, others: list[Any], dpi: float) -> bool:
                 return True
         elif marker:
             filled = other.get_markerfacecolor() not in ("none", "None") and other.get_marker() not in ("None", "")
-            if filled and other.get_markersize() >= line.get_markersize():
+            if filled and other.get_markersize() >= 0.5 * line.get_markersize():  # its centre is gone
                 gap = np.linalg.norm(pixels[:, None] - theirs[None], axis=-1).min(axis=1)
                 if np.all(gap <= 0.5 * line.get_markersize() * dpi / 72 * 0.5):
                     return True

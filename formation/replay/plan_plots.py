@@ -21,7 +21,8 @@ def _paths(ds: Any, locations: np.ndarray) -> Any:
         line = ax.plot(flown[:, 0], flown[:, 1], lw=3.5, alpha=0.6, label=f"flown: {name}", zorder=3)[0]
         ax.plot(ref[:, 0], ref[:, 1], "k--", lw=1.2, label="optimised path" if i == 0 else None, zorder=4)
         ax.plot(*flown[0], "o", color=line.get_color(), mec="k", ms=7, label="start" if i == 0 else None, zorder=5)
-        ax.plot(*flown[-1], "s", color=line.get_color(), mec="k", ms=7, label="end" if i == 0 else None, zorder=5)
+        ax.plot(*flown[-1], "s", mfc="none", mec=line.get_color(), mew=2, ms=12, label="end" if i == 0 else None,
+                zorder=5)  # hollow: a process location under it stays visible  # fmt: skip
     err = ds["tracking_error"].values
     ax.set(xlabel=f"x ({length})", ylabel=f"y ({length})", aspect="equal",
            title=f"{ds.attrs['problem']}: replayed plan\n"
