@@ -26,6 +26,7 @@ class Example:
 #: every shipped example, in the order ``mobisense examples`` lists them
 EXAMPLES: tuple[Example, ...] = (
     Example("hussein2008", "solve", "Hussein (2008)'s example: one sensor watches one scalar process (default)"),
+    Example("hussein2008_paper", "solve", "the same solved as the paper did: indirect, ε steps, bvp4c defaults"),
     Example("coupled_two_sensor", "solve", "coupled correlated 2-state process, two sensors; one must stop at tf"),
     Example("terminal_and_bound", "solve", "the default example with a rendezvous at (2, -2) at rest and |u| <= 1.5"),
     Example("sweep_hussein2008", "sweep", "sweep of the default example over the control weight and the start"),
@@ -34,13 +35,22 @@ EXAMPLES: tuple[Example, ...] = (
     Example("formation_cross_interior", "steady-state", "cross formation whose optimum is an interior minimum"),
     Example("replay_hussein2008", "replay", "the default plan flown; its promised covariance checked by Monte Carlo"),
     Example("replay_two_charges", "replay", "two rotating platforms track a level curve of two charges' potential"),
+    Example("replay_two_charges_fig3", "replay", "the rotating pair with strong short-range spatial noise"),
     Example("replay_isotherm13", "replay", "four platforms follow the 13 °C isotherm, formation shape adapted online"),
+    Example("replay_isotherm13_adaptive", "replay", "the isotherm with a Hessian error that follows the estimate"),
+    Example("replay_isotherm13_paper", "replay", "the isotherm with the paper's values (20 h, 1 km/h)"),
     Example("leader_follower_control1", "simulate leader-follower", "two unicycles under Control 1, exact sensing"),
     Example("leader_follower_control2", "simulate leader-follower", "Control 1 vs Control 2 from the same start"),
     Example("leader_follower_control3", "simulate leader-follower", "Controls 1-3, time-varying formation parameters"),
+    Example("leader_follower_control3_paper", "simulate leader-follower", "Controls 1-3 with d0(0) = 1 m"),
     Example("leader_follower_five_agents", "simulate leader-follower", "five agents on the leader's path, two rules"),
     Example("leader_follower_khepera", "simulate leader-follower", "a follower seeing through 8 IR range sensors"),
+    Example("leader_follower_khepera2", "simulate leader-follower", "the IR follower on a Khepera II sensor layout"),
+    Example("leader_follower_khepera_switching", "simulate leader-follower", "the IR follower, β0 switched 0, π/6, 0"),
     Example("distributed_advection_diffusion", "simulate distributed", "12 sensors, 9 cells: PDE-constrained filter"),
+    Example("distributed_advection_diffusion_paper", "simulate distributed", "the same with the paper's values"),
+    Example("distributed_advection_diffusion_paper_consistent", "simulate distributed",
+            "the paper's values, constrained by the PDE its field solves"),
 )  # fmt: skip
 
 

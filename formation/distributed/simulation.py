@@ -171,7 +171,11 @@ def simulate(scenario: DistributedScenario, seed: int | None = None, progress: b
     mesh = scenario.network.mesh()
     dt, K = scenario.time.step, scenario.time.n_steps
     sigma = scenario.noise_std
-    pde = PdeModel(field.diffusivity, field.velocity, dt)
+    assumed = scenario.filter.assumed_pde
+    if assumed is None:
+        pde = PdeModel(field.diffusivity, field.velocity, dt)
+    else:  # the constraint uses other θ, v than the field (docs/theory/distributed.md §10.1)
+        pde = PdeModel(assumed.diffusivity, np.asarray(assumed.velocity, dtype=float), dt)
     network = DistributedFilter(mesh, scenario.filter, sigma, pde)
     formation = GradientFormation(
         mesh, scenario.formation, np.asarray(scenario.network.positions, dtype=float)
@@ -425,12 +429,20 @@ class DistributedResult(SimulationResult):
         print("  the cell's averaged measurements, the unconstrained filter and the PDE-constrained filter")
         print(f"{'cell':>4} {'mean:':>6}{'meas.':>7} {'uncons.':>9} {'constr.':>9}  {'std:':>5}{'meas.':>6} "
               f"{'uncons.':>8} {'constr.':>8}")  # fmt: skip
+
+        def number(x: float, width: int) -> str:  # fixed point, or exponent for a diverged estimate
+            return f"{x:>{width}.4f}" if abs(x) < 1e4 else f"{x:>{width}.2e}"
+
         for row in s["error_table"]:
-            print(
-                f"{row['cell']:>4} {row['mean_noise']:>13.4f} {row['mean_unconstrained']:>9.4f} "
-                f"{row['mean_constrained']:>9.4f} {row['std_noise']:>12.4f} {row['std_unconstrained']:>8.4f} "
-                f"{row['std_constrained']:>8.4f}"
-            )
+            means = " ".join(number(row[k], w) for k, w in (("mean_noise", 13), ("mean_unconstrained", 9),
+                                                              ("mean_constrained", 9)))  # fmt: skip
+            stds = " ".join(number(row[k], w) for k, w in (("std_noise", 12), ("std_unconstrained", 8),
+                                                             ("std_constrained", 8)))  # fmt: skip
+            print(f"{row['cell']:>4} {means} {stds}")
+        worst = max(row["std_constrained"] for row in s["error_table"])
+        if not worst < 1e3 * max(row["std_noise"] for row in s["error_table"]):
+            print(f"the constrained estimate diverged (error std up to {worst:.2e}): projection "
+                  f"'{self.scenario.filter.projection}' is unstable here (docs/theory/distributed.md §10.2)")
         better = s["cells_with_lower_constrained_std"]
         print(f"constrained std lower in {len(better)}/{len(s['error_table'])} cells; results in {folder}/")
 

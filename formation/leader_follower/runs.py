@@ -25,6 +25,7 @@ from .references import (
     ConstantReference,
     PathReference,
     ReferenceSchedule,
+    SteppedReference,
 )
 from .scenario import (
     ConstantReferenceConfig,
@@ -33,6 +34,7 @@ from .scenario import (
     ReferenceConfig,
     RingSensingConfig,
     SensingConfig,
+    SteppedReferenceConfig,
 )
 from .sensing import RingSpec
 from .simulation import (
@@ -70,6 +72,9 @@ def build_reference(config: ReferenceConfig, measured_distance: dict[str, float]
         beta_end = schedule.at(duration).bearing
         warn_near_singular(min(math.cos(config.bearing), math.cos(beta_end)), "min cos beta0(t)")
         return schedule
+    if isinstance(config, SteppedReferenceConfig):
+        warn_near_singular(min(math.cos(b) for b in config.bearing), "min cos beta0")
+        return SteppedReference(config.switch_times, config.distances(), config.bearing)
     if math.cos(config.max_bearing) < WARN_COS:
         warn_near_singular(math.cos(config.max_bearing), "cos max_bearing")
     return PathReference(config.max_area, config.max_distance, config.max_bearing)

@@ -24,7 +24,7 @@ from ..level_curve import heading_error
 from ..shape_control import shape_error
 from .simulation import CenterLevelCurve, ReplayRecord, ReplaySystem
 
-__all__ = ["replay_dataset", "replay_summary", "units_of"]
+__all__ = ["replay_dataset", "replay_summary", "mean_abs_curvature", "units_of"]
 
 
 def replay_dataset(record: ReplayRecord, system: ReplaySystem, seed: int) -> Any:
@@ -156,3 +156,31 @@ def replay_summary(ds: Any, record: ReplayRecord, system: ReplaySystem) -> dict[
         )
     summary.update({k: v for k, v in record.meta.items() if k not in ("wall_time_s", "steps")})
     return summary
+
+
+def mean_abs_curvature(path: np.ndarray, step: float = 0.05, trim: int = 5) -> float:
+    """Mean absolute curvature of a polyline, resampled at equal arclength (docs/theory/replay.md §2.6).
+
+    Parameters
+    ----------
+    path : ndarray, shape (M, 2)
+        Points of the curve (L), e.g. a formation centre's path or a contour's vertices.
+    step : float
+        Arclength between resampled points (L); curvature by central differences of the resampled curve.
+    trim : int
+        Resampled points dropped at each end (one-sided differences there).
+
+    Returns
+    -------
+    float
+        ``mean |κ|`` (1/L), ``κ = (x'y'' − y'x'') / |r'|³``.
+    """
+    path = np.asarray(path, dtype=float)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+    su = np.arange(0.0, s[-1], step)
+    p = np.stack([np.interp(su, s, path[:, i]) for i in range(2)], axis=-1)
+    v = np.gradient(p, step, axis=0)
+    a = np.gradient(v, step, axis=0)
+    kappa = (v[:, 0] * a[:, 1] - v[:, 1] * a[:, 0]) / np.linalg.norm(v, axis=1) ** 3
+    return float(np.mean(np.abs(kappa[trim:-trim])))
+

@@ -20,11 +20,16 @@ class FieldReplayResult(SimulationResult):
 
     kind = "field_replay"
 
-    def __init__(self, dataset: Any, summary: dict[str, Any], system: Any, scenario: Any, animate: bool = False):
+    def __init__(
+        self, dataset: Any, summary: dict[str, Any], system: Any, scenario: Any, animate: bool = False,
+        spatial_noise: Any = None,
+    ):  # fmt: skip
         super().__init__(dataset, summary)
         self.system = system
         self.scenario = scenario
         self.animate = animate
+        #: the spatial-noise sample function ``w(points (M, 2)) -> (M,)`` of this run, or None
+        self.spatial_noise = spatial_noise
 
     def plot(self, folder: str | Path) -> list[Path]:
         """``paths.png``, ``z_estimate.png``, ``shape.png``, ``heading.png`` (+ ``replay.mp4/gif`` if animated)."""
@@ -153,7 +158,7 @@ def run_field_replay(
     record = simulate(system, seed, progress=progress)
     ds = replay_dataset(record, system, seed)
     summary = {"file": str(source), "seed": seed, **replay_summary(ds, record, system)}
-    return FieldReplayResult(ds, summary, system, scenario, animate)
+    return FieldReplayResult(ds, summary, system, scenario, animate, record.spatial_noise)
 
 
 def run_plan_replay(scenario: Any, source: Path, seed: int | None = None) -> PlanReplayResult:

@@ -24,6 +24,11 @@ SHIPPED_KINDS = {
     "leader_follower_control1": "leader_follower", "leader_follower_control2": "leader_follower",
     "leader_follower_control3": "leader_follower", "leader_follower_five_agents": "leader_follower",
     "leader_follower_khepera": "leader_follower", "distributed_advection_diffusion": "distributed",
+    "hussein2008_paper": "problem", "replay_two_charges_fig3": "field_replay",
+    "replay_isotherm13_adaptive": "field_replay", "replay_isotherm13_paper": "field_replay",
+    "leader_follower_control3_paper": "leader_follower", "leader_follower_khepera2": "leader_follower",
+    "leader_follower_khepera_switching": "leader_follower", "distributed_advection_diffusion_paper": "distributed",
+    "distributed_advection_diffusion_paper_consistent": "distributed",
 }  # fmt: skip
 
 
@@ -154,3 +159,9 @@ def test_the_default_install_leaves_the_sweep_dependencies_to_the_extra():
     assert not names & {"dask", "distributed", "pyarrow"}
     assert {re.split(r"[<>=\[ ]", d)[0] for d in project["optional-dependencies"]["sweep"]} == {"dask", "pyarrow"}
     assert project["license"] == "BSD-3-Clause" and (PROBLEMS.parent / "LICENSE").is_file()
+
+
+def test_the_readme_describes_every_shipped_example_in_one_line():
+    readme = (PROBLEMS.parent / "README.md").read_text(encoding="utf-8")
+    for example in EXAMPLES:
+        assert re.search(rf"^\| `{example.name}\.yaml` \| `{example.command}` \| \S", readme, flags=re.M), example.name
