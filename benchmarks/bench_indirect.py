@@ -10,7 +10,7 @@ On the default problem (problems/hussein2008.yaml, Radau d = 3, K = 100, δ = 0.
 
 each as a ratio to the direct homotopy, plus one-off build times. ``--natural`` also runs what does *not*
 work: natural-parameter continuation with ``solve_bvp`` (adaptive ε steps), which stalls at the fold of
-the solution curve near ε = 0.0059.
+the solution curve near ε = 0.0059 (with the paper's fixed δ = 0.05 it fails at its first step, ε = 0.05).
 
 Usage: ``python benchmarks/bench_indirect.py [--repeats 3] [--natural]``
 """

@@ -36,6 +36,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "integrate": "mobisense.ocp.simulate",
         "coast": "mobisense.ocp.simulate",
         "run_continuation": "mobisense.ocp.homotopy",
+        "fixed_schedule": "mobisense.ocp.homotopy",
         "solve_both": "mobisense.ocp.compare",
         "agreement": "mobisense.ocp.compare",
         "save_figures": "mobisense.ocp.plots",

@@ -33,11 +33,11 @@ comparison) runs beside the constrained one with the same gain.
 
 Two choices the paper leaves open or gets wrong for this state (docs/theory/departures.md):
 
-* Projection metric. Eq. 34 is the Euclidean projection; fed back through eq. 28 it is unstable here
-  (the state mixes values and gradients, whose units differ: spectral radius 1.12 of the steady-state
-  error map of the paper's cells, see the tests). The default ``projection: covariance`` is Simon & Chia's
-  minimum-variance projection ``x̃ = x̂ − P G'(G P G')⁻¹(G x̂ − ĝ)``, unit-independent and stable;
-  ``euclidean`` reproduces eq. 34.
+* Projection metric. Eq. 34 is the Euclidean projection; the state mixes values and gradients, whose units
+  differ, so its stability fed back through eq. 28 depends on the length unit (network error map: spectral
+  radius 1.24 in metres at the shipped settings, 0.91 in units of 10 m; docs/theory/distributed.md §10.2). The
+  default ``projection: covariance`` is Simon & Chia's minimum-variance projection
+  ``x̃ = x̂ − P G'(G P G')⁻¹(G x̂ − ĝ)``, unit-independent and stable; ``euclidean`` reproduces eq. 34.
 * Hessian. With all sensors at one distance from the centre (a square, a regular triangle) the centre
   value and the Hessian's trace enter the measurements identically, so the least-squares Hessian
   (eq. 18) absorbs value errors it cannot tell apart; ridge regression (eq. 19, the default) keeps the
@@ -53,13 +53,14 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from ...core.config import NonNegativeFloat, PositiveFloat, StrictModel
+from ...core.config import NonNegativeFloat, PositiveFloat, StrictModel, Vector2
 from ..cooperative.information_model import transition_matrix, vec_to_hessian
 from ..kalman import predict, update
 from .fvm import far_points, laplacian_stencil, pde_constraint, project
 from .mesh import CellEdge, SensorMesh
 
 __all__ = [
+    "AssumedPde",
     "ValueGradientStd",
     "HessianOptions",
     "FilterOptions",
@@ -99,6 +100,18 @@ class HessianOptions(StrictModel):
     error_std: NonNegativeFloat = Field(0.0, description="std of each vec(H) entry error (field unit / L²)")
 
 
+class AssumedPde(StrictModel):
+    """The PDE the filter's constraint assumes, when it differs from the field's (docs/theory/distributed.md §10.1).
+
+    The test field of Zhang et al. (2023), §8, is not a solution of ``∂z/∂t = θΔz + v·∇z`` with its own θ and v,
+    but it is an exact solution with ``θ' = θ k₂/k₁²`` and ``v' = (k₂/k₁) v`` (eq. distributed.19: 0.08 m²/s and
+    0.002 v for k₁ = 0.05, k₂ = 1e-4); ``assumed_pde`` lets the filter use either.
+    """
+
+    diffusivity: PositiveFloat = Field(description="θ assumed by the constraint (L²/s)")
+    velocity: Vector2 = Field(description="v assumed by the constraint (L/s)")
+
+
 class FilterOptions(StrictModel):
     """Noise model of the per-cell filter (Zhang et al. (2023), Assumption 5.1) and its initialisation."""
 
@@ -108,6 +121,9 @@ class FilterOptions(StrictModel):
     projection: Literal["covariance", "euclidean"] = Field(
         "covariance",
         description="metric of the constraint projection: P (minimum variance) or I (Zhang et al. (2023), eq. 34)",
+    )
+    assumed_pde: AssumedPde | None = Field(
+        None, description="θ, v of the constraint if not the field's (default: the field's own)"
     )
 
 

@@ -214,6 +214,40 @@ class RangeSensorRing:
             reading = reading + self.noise_std * rng.standard_normal(reading.shape)
         return np.where(self.visible(pose, target), np.maximum(reading, 0.0), np.nan)
 
+    def fix_bearing_std(self, pose: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """Bearing standard deviation of one triangulated fix by each pair (docs/theory/leader_follower.md §6).
+
+        For a target at ``target`` seen from ``pose``, noise-free geometry: the component of each active pair's
+        triangulation covariance (eq. leader_follower.19) across the line of sight from the robot centre,
+        divided by the centre distance (eq. leader_follower.23).
+
+        Parameters
+        ----------
+        pose : ndarray, shape (3,)
+            Robot pose ``(x, y, φ)`` (m, m, rad).
+        target : ndarray, shape (2,)
+            Target centre (m).
+
+        Returns
+        -------
+        ndarray, shape (P,)
+            Bearing std (rad) per pair; NaN for pairs that are not active (a sensor does not see the target).
+        """
+        pose = np.asarray(pose, dtype=float)
+        target = np.asarray(target, dtype=float)
+        pairs = self.pair_measurements(pose, self.read(pose, target))
+        los = target - pose[:2]
+        distance = float(np.hypot(*los))
+        across = np.array([-los[1], los[0]]) / distance
+        out = np.full(self.n_pairs, np.nan)
+        if np.any(pairs.active):
+            sensors = self.sensor_positions(pose)
+            q_prev, q = self.pairs[pairs.active, 0], self.pairs[pairs.active, 1]
+            targets = np.broadcast_to(target, (len(q), 2))
+            cov = triangulation_covariance(sensors[q], sensors[q_prev], targets, self.noise_std)
+            out[pairs.active] = np.sqrt(np.einsum("i,pij,j->p", across, cov, across)) / distance
+        return out
+
     def pair_measurements(self, pose: np.ndarray, readings: np.ndarray) -> PairMeasurements:
         """Activity test and triangulation for every pair (Algorithm 7.1, steps 2–4).
 

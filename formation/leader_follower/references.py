@@ -8,6 +8,8 @@ A schedule is a small class registered in :data:`REFERENCES` and evaluated with
 
 * :class:`ConstantReference` — fixed ``d0, β0`` (Theorems 1 and 2).
 * :class:`BearingRampReference` — Karasalo & Hu (2010), eq. 55: ``β̇0 = c``, ``ḋ0 = a cos(f β0)``, in closed form.
+* :class:`SteppedReference` — piecewise-constant ``d0, β0`` switched at given times (Karasalo & Hu (2010), §8.1,
+  "robustness for switching β0", Fig. 9: β0 = 0 → π/6 at 10 s → 0 at 60 s).
 * :class:`PathReference` — dynamic parameters for path following (Karasalo & Hu (2010), §8.3, Fig. 13): the follower
   aims at the furthest point of its predecessor's travelled path whose chord keeps the area between path and chord
   below ``A_max``; needs the predecessor's path history, so it is updated at sample instants.
@@ -15,8 +17,10 @@ A schedule is a small class registered in :data:`REFERENCES` and evaluated with
 
 from __future__ import annotations
 
+import bisect
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -29,6 +33,7 @@ __all__ = [
     "ReferenceSchedule",
     "ConstantReference",
     "BearingRampReference",
+    "SteppedReference",
     "PathReference",
     "REFERENCES",
     "register_reference",
@@ -149,6 +154,46 @@ class BearingRampReference(ReferenceSchedule):
         else:  # ḋ0 constant
             d0 = self.distance + a * math.cos(f * self.bearing) * t
         return FormationReference(d0, beta0, a * math.cos(f * beta0), c)
+
+
+@register_reference
+class SteppedReference(ReferenceSchedule):
+    """Piecewise-constant formation parameters switched at given instants (docs/theory/leader_follower.md §4.4).
+
+    Source: Karasalo & Hu (2010), §8.1, Fig. 9.
+
+    Parameters
+    ----------
+    switch_times : sequence of float
+        Strictly increasing switching instants ``t_1 < … < t_m`` (s).
+    distances, bearings : sequence of float
+        ``d0`` (m) and ``β0`` (rad) on ``[0, t_1), [t_1, t_2), …, [t_m, ∞)`` (``m + 1`` values each).
+
+    Notes
+    -----
+    Between switches the parameters are constant, so Control 1 is Theorem 1's control on each piece (its
+    reference-point error decays as ``e^{−kt}`` after each switch, starting from the jump the switch causes).
+    The rates are Dirac impulses at the switches, so ``provides_rates = False``: Control 3's feed-forward is
+    undefined and scenarios reject it with this schedule.
+    """
+
+    kind = "steps"
+    provides_rates = False
+
+    def __init__(self, switch_times: Sequence[float], distances: Sequence[float], bearings: Sequence[float]) -> None:
+        self.switch_times = [float(t) for t in switch_times]
+        self.distances = [float(d) for d in distances]
+        self.bearings = [float(b) for b in bearings]
+        m = len(self.switch_times)
+        if len(self.distances) != m + 1 or len(self.bearings) != m + 1:
+            raise ValueError(f"expected {m + 1} distances and bearings for {m} switch times")
+        if any(b <= a for a, b in zip(self.switch_times[:-1], self.switch_times[1:], strict=True)):
+            raise ValueError(f"expected strictly increasing switch times, got {self.switch_times}")
+
+    def at(self, t: float, history: np.ndarray | None = None) -> FormationReference:
+        """The piece containing ``t`` (a switch instant belongs to the piece it starts)."""
+        k = bisect.bisect_right(self.switch_times, t)
+        return FormationReference(self.distances[k], self.bearings[k])
 
 
 @register_reference

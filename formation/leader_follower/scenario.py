@@ -39,6 +39,7 @@ __all__ = [
     "FollowerConfig",
     "ConstantReferenceConfig",
     "RampReferenceConfig",
+    "SteppedReferenceConfig",
     "PathReferenceConfig",
     "ExactSensingConfig",
     "RingSensingConfig",
@@ -113,6 +114,37 @@ class RampReferenceConfig(StrictModel):
     distance_rate_frequency: FiniteFloat = 0.0
 
 
+class SteppedReferenceConfig(StrictModel):
+    """Piecewise-constant ``d0`` (m), ``β0`` (rad) switched at ``switch_times`` (s).
+
+    Theory: docs/theory/leader_follower.md §4.4; source: Karasalo & Hu (2010), §8.1, Fig. 9.
+
+    ``bearing`` lists ``m + 1`` values for ``m`` switch times; ``distance`` is one value (kept throughout) or
+    ``m + 1`` values. Example (Fig. 9): ``{kind: steps, distance: 0.12, bearing: [0, 0.5236, 0],
+    switch_times: [10, 60]}``.
+    """
+
+    kind: Literal["steps"]
+    switch_times: Annotated[list[PositiveFloat], Field(min_length=1)]
+    bearing: list[Bearing]
+    distance: PositiveFloat | list[PositiveFloat]
+
+    @model_validator(mode="after")
+    def _pieces(self) -> SteppedReferenceConfig:
+        m = len(self.switch_times)
+        if any(b <= a for a, b in zip(self.switch_times[:-1], self.switch_times[1:], strict=True)):
+            raise InvalidValue("switch_times", f"expected strictly increasing times, got {self.switch_times}")
+        if len(self.bearing) != m + 1:
+            raise InvalidValue("bearing", f"expected {m + 1} values for {m} switch times, got {len(self.bearing)}")
+        if isinstance(self.distance, list) and len(self.distance) != m + 1:
+            raise InvalidValue("distance", f"expected one value or {m + 1} values, got {len(self.distance)}")
+        return self
+
+    def distances(self) -> list[float]:
+        """``d0`` on each piece."""
+        return list(self.distance) if isinstance(self.distance, list) else [self.distance] * len(self.bearing)
+
+
 class PathReferenceConfig(StrictModel):
     """Dynamic path-following parameters (Karasalo & Hu (2010), §8.3, Fig. 13): tolerance ``A_max`` (m²) and bounds."""
 
@@ -123,7 +155,8 @@ class PathReferenceConfig(StrictModel):
 
 
 ReferenceConfig = Annotated[
-    ConstantReferenceConfig | RampReferenceConfig | PathReferenceConfig, Field(discriminator="kind")
+    ConstantReferenceConfig | RampReferenceConfig | SteppedReferenceConfig | PathReferenceConfig,
+    Field(discriminator="kind"),
 ]
 
 
@@ -198,6 +231,7 @@ class RunConfig(StrictModel):
 class LeaderFollowerScenario(StrictModel):
     """A leader–follower simulation scenario (see the module docstring)."""
 
+    kind: Literal["leader_follower"] | None = Field(None, description="file kind (optional: 'leader' tells it)")
     name: str
     description: str = ""
     duration: PositiveFloat
@@ -233,7 +267,9 @@ class LeaderFollowerScenario(StrictModel):
             control = run.control or self.control
             reference = run.reference or self.reference
             where = f"runs[{i}].reference" if run.reference is not None else "reference"
-            if CONTROLS[control].uses_reference_rates and isinstance(reference, PathReferenceConfig):
+            if CONTROLS[control].uses_reference_rates and isinstance(
+                reference, PathReferenceConfig | SteppedReferenceConfig
+            ):
                 raise InvalidValue(
                     f"runs[{i}].control",
                     f"{control} needs the rates of d0 and beta0; use a 'constant' or 'ramp' reference, or control1",

@@ -17,6 +17,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "plot_paths": "mobisense.formation.replay.plots",
         "ClosedLoopEstimator": "mobisense.formation.replay.estimator",
         "build_system": "mobisense.formation.replay.simulation",
+        "mean_abs_curvature": "mobisense.formation.replay.results",
         "simulate": "mobisense.formation.replay.simulation",
     },
 )

@@ -38,6 +38,7 @@ from ...core.config import (
     Vector2,
     parse_config,
 )
+from ...core.units import LengthUnit, PhysicalUnit, TimeUnit
 from ...estimation.cooperative.information_model import cross_formation
 from ...estimation.cooperative.noise_config import NoiseConfig
 from ...estimation.cooperative.spatial_noise import SpatialNoiseConfig
@@ -274,6 +275,17 @@ class FilterConfig(StrictModel):
     initial_hessian: Literal["true_field", "zero"] = "true_field"
     hessian_smoothing: float = Field(1.0, gt=0.0, le=1.0, description="β of Ĥ ← Ĥ + β (Ĥ_raw − Ĥ)")
     hessian_warmup: int = Field(0, ge=0, description="samples before the Hessian source is first used")
+    estimator: Literal["kalman", "window_fit"] = Field(
+        "kalman",
+        description="what the controllers see: the cooperative Kalman filter, or (no filter, for comparison, "
+        "Zhang & Leonard (2010), Fig. 3) a joint quadratic least-squares fit to the last fit_window samples, "
+        "moved to the centre",
+    )
+    fit_window: int = Field(6, ge=3, le=1000, description="samples of the window_fit estimator")
+    hessian_relative_error: NonNegativeFloat = Field(
+        0.0,
+        description="ρ of U_k = σ3² I + ρ² diag(vec(Ĥ_F)²) in the level-curve frame F (0: constant U = σ3² I)",
+    )
 
     @model_validator(mode="after")
     def _two(self) -> FilterConfig:
@@ -283,11 +295,11 @@ class FilterConfig(StrictModel):
 
 
 class UnitsConfig(StrictModel):
-    """Unit labels for figures: length, time, field."""
+    """Units of the file's numbers (UDUNITS; default metre, second, dimensionless field), written to result.nc."""
 
-    length: str = "L"
-    time: str = "T"
-    field: str = "F"
+    length: LengthUnit = "m"
+    time: TimeUnit = "s"
+    field: PhysicalUnit = "1"
 
 
 class PlotConfig(StrictModel):
@@ -308,6 +320,7 @@ class PlotConfig(StrictModel):
 class FieldReplayScenario(StrictModel):
     """A closed-loop replay on a field: formation control + level-curve tracking + cooperative filter."""
 
+    kind: Literal["field_replay"] | None = Field(None, description="file kind (optional: a 'field' key tells it)")
     name: str = Field(pattern=r"^[A-Za-z0-9_.\-]+$")
     field: FieldSpec
     spatial_noise: SpatialNoiseConfig | None = None

@@ -137,7 +137,8 @@ def build_system(scenario: FieldReplayScenario, scenario_path: Path) -> ReplaySy
     field_ = scenario.field.build()
     f = scenario.filter
     estimator = ClosedLoopEstimator(
-        noise.to_noise(), spatial, f.hessian, field_, f.window, f.hessian_smoothing, f.hessian_warmup
+        noise.to_noise(), spatial, f.hessian, field_, f.window, f.hessian_smoothing, f.hessian_warmup,
+        f.hessian_relative_error, f.estimator, f.fit_window,
     )
     limits = PlatformLimits(scenario.platforms.max_force, scenario.platforms.max_speed)
     true_derivatives = isinstance(motion, LevelCurveMotion) and motion.derivatives == "true_field"
@@ -154,6 +155,9 @@ class ReplayRecord:
     z_true, z_est : (K+1,) ; grad_true, grad_est : (K+1, 2) ; hess_true, hess_est : (K+1, 2, 2)
     covariance : (K+1, 3, 3) posterior P ; a_desired, b_desired : (K+1,) ; q_desired : (K+1, N−1, 2)
     extra : (K+1, n_extra) ; reference : (K+1, 2) or None
+    spatial_noise : callable or None
+        The sample function ``w(points (M, 2)) -> (M,)`` of the spatial noise drawn for this run (None without
+        spatial noise), e.g. to draw the noisy level curve ``z + w = C``.
     """
 
     t: list = field(default_factory=list)
@@ -172,6 +176,7 @@ class ReplayRecord:
     q_desired: list = field(default_factory=list)
     extra: list = field(default_factory=list)
     reference: Any = None
+    spatial_noise: Any = None
     meta: dict[str, Any] = field(default_factory=dict)
 
     def arrays(self) -> dict[str, np.ndarray]:
@@ -268,8 +273,8 @@ def _adapt_shape(system: ReplaySystem, y: np.ndarray, k: int) -> None:
         for (lo, hi), c in zip(adaptive.bounds.pairs(), current, strict=True)
     )  # trust region around the current shape
     design = adaptive_shape_step(
-        P, system.estimator.base_noise, box, system.shape.angle(vc), adaptive.equal_sides
-    )
+        P, system.estimator.design_noise(), box, system.shape.angle(vc), adaptive.equal_sides
+    )  # U_k of the current Hessian estimate (constant σ3² I unless filter.hessian_relative_error > 0)
     system.shape.set_offsets(cross_formation(*design.x))
 
 
@@ -323,7 +328,7 @@ def simulate(system: ReplaySystem, seed: int | None = None, progress: bool = Fal
     times = np.linspace(0.0, s.duration, steps + 1)
     y = _initial_state(system, rng)
     _start_estimator(system, loop, loop.split(y)[0], rng)
-    rec = ReplayRecord()
+    rec = ReplayRecord(spatial_noise=loop.w)
     scale = max(1.0, float(np.abs(y[: 2 * loop.N]).max()))
     atol = np.concatenate([np.full(4 * loop.N, 1e-9 * scale), np.full(len(y) - 4 * loop.N, 1e-9)])
     started = time.perf_counter()

@@ -10,6 +10,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "refine_from_direct": "mobisense.ocp.indirect.solver",
         "make_bvp_solver": "mobisense.ocp.indirect.solver",
         "kalman_guess": "mobisense.ocp.indirect.solver",
+        "follow_schedule": "mobisense.ocp.indirect.solver",
         "solution_from_bvp": "mobisense.ocp.indirect.solver",
         "HamiltonianSystem": "mobisense.ocp.indirect.hamiltonian",
         "hamiltonian_system": "mobisense.ocp.indirect.hamiltonian",

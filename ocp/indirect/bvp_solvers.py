@@ -18,7 +18,9 @@ Solvers:
 ``scipy``
     ``scipy.integrate.solve_bvp`` (4th-order Lobatto IIIA collocation with residual control and mesh
     refinement) with the vectorised CasADi right-hand side and exact Jacobians ``fun_jac``/``bc_jac``.
-    Its continuation is natural-parameter (one ε at a time), which cannot pass a fold.
+    Its continuation is natural-parameter (one ε at a time, each solve seeded by the last — Hussein's (2008)
+    method), which cannot pass a fold: on the default problem it stops at ε ≈ 0.006, or, with the paper's
+    δ = 0.05, fails at its first step (docs/theory/indirect.md §3.4).
 """
 
 from __future__ import annotations
@@ -102,6 +104,10 @@ class BVPSolver(ABC):
     """
 
     name: str = ""
+    #: ``follow`` is a natural-parameter step (solve at the new ε from the last solution). From ε = 0, where
+    #: μ ≡ 0 carries no costate information, the continuation then seeds the first step with the Kalman guess
+    #: at that ε (states and adjoint costates), as Hussein (2008, §IV) does.
+    natural_parameter: bool = False
 
     def __init__(self, problem: Problem, values: dict[str, Any], scales: np.ndarray) -> None:
         self.problem = problem
@@ -262,8 +268,22 @@ class ScipyBVP(BVPSolver):
         )
 
     def follow(self, start: BVPSolution, eps: float) -> BVPSolution:
-        """Natural-parameter step: ``solve_bvp`` at ε from ``start`` on its mesh."""
-        return self.solve(eps, start)
+        """Natural-parameter step, as Hussein (2008, §IV) does: ``solve_bvp`` at ε from ``start`` on its mesh.
+
+        The guess keeps ``start``'s states and PMP costates λ = μ/ε (the paper's unknowns), i.e. the scaled
+        costates are multiplied by ε/ε_start. (From ε_start = 0, where μ ≡ 0 carries no λ, the continuation
+        passes the Kalman guess to :meth:`solve` instead: :attr:`BVPSolver.natural_parameter`.)
+        """
+        if start.eps <= 0.0:
+            return self.solve(eps, start)
+        nx, ratio, evaluate = self.system.structure.nx, eps / start.eps, start.evaluate
+
+        def guess(tt: np.ndarray) -> np.ndarray:
+            y = np.array(evaluate(tt), dtype=float)
+            y[nx:] *= ratio
+            return y
+
+        return self.solve(eps, guess, mesh=start.t)
 
     def _costs(self, sol: Any, P: np.ndarray) -> tuple[float, float, float]:
         """Φ(x(tf)) and Gauss–Legendre quadrature of L, α/2|u|² on the cubic solution."""

@@ -38,6 +38,7 @@ __all__ = [
     "solution_from_bvp",
     "indirect_summary",
     "make_bvp_solver",
+    "follow_schedule",
 ]
 
 
@@ -212,7 +213,10 @@ def solve_indirect(
         states and costates seed the BVP at ε = 1 directly (with ``solver.bvp.refine_solver``); if that
         does not converge, the continuation from the Kalman solution runs.
 
-    See :func:`indirect_continuation`, which also returns the dense BVP solution.
+    Returns
+    -------
+    Solution
+        ``method="indirect"``; see :func:`indirect_continuation`, which also returns the dense BVP solution.
     """
     if init is not None and init.success and init.Lam is not None:
         seeded = _solve_seeded(problem, init)
@@ -284,7 +288,12 @@ def indirect_continuation(
     state = {"current": start}
 
     def attempt(eps: float) -> bool:
-        result = bvp.follow(state["current"], eps)
+        current = state["current"]
+        if current.eps == 0.0 and bvp.natural_parameter:
+            # Hussein's (2008) first step: seeded by the Kalman filter and its adjoint costates (μ = ε λ_K)
+            result = bvp.solve(eps, guess_at(eps))
+        else:
+            result = bvp.follow(current, eps)
         status = "converged" if result.success else result.message
         step = HomotopyStep(eps, result.cost_eps, result.iterations, status, result.time_s, result.success)
         steps.append(step)
@@ -328,6 +337,30 @@ def indirect_continuation(
         "total_time_s": elapsed,
     }
     return solution, final
+
+
+def follow_schedule(solver: BVPSolver, start: BVPSolution, schedule: list[float]) -> list[BVPSolution]:
+    """Continue ``start`` through the ε values of ``schedule`` above ``start.eps`` with ``solver.follow``.
+
+    With a natural-parameter solver (``solve_bvp``) and ``schedule = fixed_schedule(δ)`` this is the
+    continuation of Hussein (2008, §IV) from any solution, e.g. one on the far branch of the ε-family
+    (docs/theory/indirect.md §3.4).
+
+    Returns
+    -------
+    list of BVPSolution
+        One per attempted ε, in order; the last is the first failure, if any.
+    """
+    steps: list[BVPSolution] = []
+    current = start
+    for eps in schedule:
+        if eps <= start.eps:
+            continue
+        current = solver.follow(current, eps)
+        steps.append(current)
+        if not current.success:
+            break
+    return steps
 
 
 def _polish(problem: Problem, solver: BVPSolver, solution: BVPSolution) -> tuple[BVPSolution, dict[str, Any]]:

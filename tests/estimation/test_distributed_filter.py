@@ -94,8 +94,9 @@ def test_hessian_fits() -> None:
 def test_projection_metric_decides_stability() -> None:
     """Steady-state error map of a static cell with the projection fed back (Zhang et al. (2023), eq. 28, uses x̃+).
 
-    The paper's Euclidean projection (M = I) mixes values and gradients of different units and makes
-    the loop unstable; the covariance-weighted one (M = P+) keeps it stable (our default).
+    The paper's Euclidean projection (M = I) mixes values and gradients of different units and, at these
+    settings in metres, makes the loop unstable (its stability depends on the length unit: docs/theory/distributed.md
+    §10.2); the covariance-weighted one (M = P+) keeps it stable (our default).
     """
     positions, cells = paper_network()
     offsets = positions[cells[0]] - positions[cells[0]].mean(axis=0)
