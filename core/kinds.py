@@ -107,6 +107,8 @@ def detect_kind(data: Any, source: str | Path) -> str:
     ConfigError
         Not a mapping, an unknown ``kind``, or a shape that fits no kind or several.
     """
+    if data is None:
+        raise ConfigError(f"{source}: (top level): the file is empty; expected a mapping of keys")
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: (top level): expected a mapping of keys, got {type(data).__name__}")
     names = sorted(FILE_KINDS)
