@@ -1,4 +1,4 @@
-"""The ``mobisense`` command line: ``mobisense solve|validate|sweep|steady-state|replay|simulate …``.
+"""The ``mobisense`` command line: ``mobisense solve|sweep|steady-state|replay|simulate|validate|schema|examples``.
 
 :data:`COMMANDS` is the one registry of sub-commands. Each names a class in its package's ``commands``
 module whose docstring's first line is its help text, with ``add_arguments(parser)`` and
@@ -8,7 +8,8 @@ could not be written (results already complete are kept), 2 invalid input — a 
 output folder that cannot be used, a problem too large for the memory budget (one line naming the file and
 the key path, no traceback, nothing written), 3 an internal error (a bug: one line; set
 ``MOBISENSE_TRACEBACK=1`` to see the traceback), 130 interrupted (Ctrl-C or SIGTERM; files already written
-are complete).
+are complete), 141 standard output closed by its reader (``mobisense examples | head -1``; quietly, as a
+program ended by SIGPIPE).
 """
 
 from __future__ import annotations
@@ -28,11 +29,13 @@ __all__ = ["COMMANDS", "build_parser", "main"]
 #: sub-command name -> "module:class" implementing it
 COMMANDS: dict[str, str] = {
     "solve": "mobisense.ocp.commands:SolveCommand",
-    "validate": "mobisense.ocp.commands:ValidateCommand",
     "sweep": "mobisense.ocp.commands:SweepCommand",
     "steady-state": "mobisense.estimation.commands:SteadyStateCommand",
     "replay": "mobisense.formation.commands:ReplayCommand",
     "simulate": "mobisense.formation.commands:SimulateCommand",
+    "validate": "mobisense.core.commands:ValidateCommand",
+    "schema": "mobisense.core.commands:SchemaCommand",
+    "examples": "mobisense.core.commands:ExamplesCommand",
 }
 
 
@@ -73,15 +76,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (also used by ``python -m``/console script)."""
     said: list[str] = []
     try:
-        return _main(argv, said)
+        status = _main(argv, said)
+        sys.stdout.flush()  # a closed pipe is met here, not at interpreter exit
+        return status
     except KeyboardInterrupt:  # also during the imports, or while an error is being reported
         if not said:
             _say("interrupted; files already written are complete")
         return 130
+    except BrokenPipeError:  # stdout closed by the reader (``mobisense examples | head -1``): end quietly
+        _discard_stdout()
+        return 128 + signal.SIGPIPE
 
 
 def _main(argv: Sequence[str] | None, said: list[str]) -> int:
     from .core.errors import ComputationError, ConfigError, OutputError, one_line
+    from .core.netcdf import recorded_command
 
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
@@ -95,7 +104,8 @@ def _main(argv: Sequence[str] | None, said: list[str]) -> int:
     # overflow/invalid-value warnings of intermediate steps are not messages: results are checked for NaN/inf
     errors = np.seterr(all="ignore")
     try:
-        return int(args.run(args) or 0)
+        with recorded_command(argv):  # the "history" of every netCDF file written
+            return int(args.run(args) or 0)
     except ConfigError as err:
         _say(f"error: {one_line(str(err), 600)}")
         return 2
@@ -106,6 +116,8 @@ def _main(argv: Sequence[str] | None, said: list[str]) -> int:
         said.append("interrupted")
         _say("interrupted; files already written are complete")
         return 130
+    except BrokenPipeError:
+        raise
     except MemoryError:
         _say("error: out of memory; lower the problem size (or --max-memory, the budget checked before starting)")
         return 1
@@ -125,6 +137,16 @@ def _main_thread() -> bool:
     import threading
 
     return threading.current_thread() is threading.main_thread()
+
+
+def _discard_stdout() -> None:
+    """Point stdout at /dev/null so the interpreter's final flush does not raise again."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):  # stdout has no file descriptor (tests capture it)
+        pass
 
 
 def _say(text: str) -> None:

@@ -27,6 +27,8 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "write_json": "mobisense.core.files",
         "write_netcdf": "mobisense.core.files",
         "write_figure": "mobisense.core.files",
+        "open_dataset": "mobisense.core.netcdf",
+        "UnitSystem": "mobisense.core.units",
         "get_path": "mobisense.core.keypath",
         "set_path": "mobisense.core.keypath",
         "parse_key_path": "mobisense.core.keypath",

@@ -87,9 +87,16 @@ def write_json(path: str | Path, data: dict[str, Any]) -> None:
 
 
 def write_netcdf(path: str | Path, dataset: Any) -> None:
-    """Write an ``xarray.Dataset`` with the h5netcdf engine, atomically."""
+    """Write an ``xarray.Dataset`` as a CF-1.10 netCDF-4 file (h5netcdf), atomically.
+
+    The global attributes, encoding and string labels are those of :func:`mobisense.core.netcdf.prepare`;
+    :func:`mobisense.core.netcdf.open_dataset` reads the file back as the dataset it was.
+    """
+    from .netcdf import prepare
+
+    prepared, encoding = prepare(dataset)
     with atomic_path(path) as tmp:
-        dataset.to_netcdf(tmp, mode="w", engine="h5netcdf")
+        prepared.to_netcdf(tmp, mode="w", engine="h5netcdf", encoding=encoding)
 
 
 def write_figure(path: str | Path, draw: Callable[[], Any]) -> None:

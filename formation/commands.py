@@ -39,7 +39,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["ReplayCommand", "SimulateCommand", "SIMULATION_KINDS"]
+__all__ = ["ReplayCommand", "SimulateCommand", "SIMULATION_KINDS", "check_scenario"]
 
 #: ``mobisense simulate KIND`` -> scenario kind of :mod:`mobisense.formation.scenarios`
 SIMULATION_KINDS: dict[str, str] = {"leader-follower": "leader_follower", "distributed": "distributed"}
@@ -53,7 +53,9 @@ class ReplayCommand:
         """Add the ``replay`` arguments."""
         from ..core.budget import add_budget_argument
 
-        parser.add_argument("scenario", type=Path, help="scenario YAML file (see problems/replay_*.yaml)")
+        parser.add_argument(
+            "scenario", type=Path, help="scenario YAML file (see problems/replay_*.yaml) or a shipped example's name"
+        )
         parser.add_argument("--out", type=Path, default=None, help="output folder (default out/<file name>)")
         parser.add_argument("--seed", type=_seed, default=None, help="override the scenario's random seed")
         parser.add_argument("--no-plot", action="store_true", help="skip the figures")
@@ -80,7 +82,7 @@ class SimulateCommand:
         from ..core.budget import add_budget_argument
 
         parser.add_argument("kind", choices=sorted(SIMULATION_KINDS), help="which simulation")
-        parser.add_argument("scenario", type=Path, help="scenario YAML file")
+        parser.add_argument("scenario", type=Path, help="scenario YAML file, or a shipped example's name")
         parser.add_argument("--out", type=Path, default=None, help="output folder (default out/<file name>)")
         parser.add_argument("--no-plot", action="store_true", help="skip the figures")
         parser.add_argument("--seed", type=_seed, default=None, help="override the scenario's random seed")
@@ -108,9 +110,11 @@ def _simulate(args: argparse.Namespace, kind: str, run: Callable[[Any], Any]) ->
     """Load, budget, check the output folder, lock it, simulate, save; the exit status."""
     from ..core.budget import check_budget
     from ..core.errors import numerical_failures
+    from ..core.examples import resolve_input
     from ..core.output import OutputFolder, default_output_folder
     from .scenarios import load_scenario
 
+    args.scenario = resolve_input(args.scenario)
     source = str(args.scenario)
     scenario = load_scenario(args.scenario, kind)  # ConfigError -> exit 2, nothing written
     check_budget(scenario.estimates(), args.max_memory, source, args.max_time)
@@ -130,3 +134,35 @@ def _simulate(args: argparse.Namespace, kind: str, run: Callable[[Any], Any]) ->
         print(f"mobisense: {status}", file=sys.stderr)
         return 1
     return 0
+
+
+def check_scenario(data: dict, path: Path, kind: str) -> str:
+    """Validate a scenario file of ``kind`` (and the files it names); one line saying what it is."""
+    from ..core.config import parse_config
+    from .scenarios import scenario_model
+
+    config = parse_config(data, scenario_model(kind), source=str(path))
+    if kind == "plan_replay":
+        from .replay.plan import resolve
+        from .replay.reference import reference_status
+
+        status = reference_status(resolve(path, config.solution), resolve(path, config.problem))
+        runs = config.monte_carlo.runs
+        return f"plan replay {config.name!r}: {status}; Monte Carlo with {runs} runs"
+    if kind == "field_replay":
+        return (
+            f"field replay {config.name!r}: {config.platforms.count} platforms, {config.formation.kind} formation, "
+            f"{config.motion.kind.replace('_', ' ')} motion on the field {config.field.kind!r} for "
+            f"{config.duration:g} {config.units.time}"
+        )
+    if kind == "leader_follower":
+        runs = ", ".join(f"{name} ({control})" for name, control, _, _ in config.resolved_runs())
+        return (
+            f"leader–follower simulation {config.name!r}: a leader and {len(config.followers)} follower(s) "
+            f"for {config.duration:g} s; runs {runs}"
+        )
+    n_sensors, n_cells = len(config.network.positions), len(config.network.cells)
+    return (
+        f"distributed-filter simulation {config.name!r}: {n_sensors} sensors in {n_cells} cells, "
+        f"{config.time.duration:g} s sampled every {config.time.step:g} s"
+    )

@@ -115,9 +115,11 @@ class ComparedSolution(Solution):
             "lam_p": ("time_indirect", "sensor", "xy"),
             "lam_v": ("time_indirect", "sensor", "xy"),
         }
-        ds = ds.assign_coords(time_indirect=other.t)
+        from .solution_dataset import variable_attrs
+
+        ds = ds.assign_coords(time_indirect=("time_indirect", other.t, variable_attrs(self, "time_indirect")))
         for name, dim in dims.items():
-            ds[f"indirect_{name}"] = (dim, getattr(other, name), {"long_name": f"{name} of the indirect solution"})
+            ds[f"indirect_{name}"] = (dim, getattr(other, name), variable_attrs(self, name, " (indirect solution)"))
         return ds
 
 

@@ -22,6 +22,8 @@ Outputs are dicts of arrays with the batch first: ``x`` (…, K, 3), ``P`` ([…
 from __future__ import annotations
 
 import functools
+import os
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -244,7 +246,8 @@ def _rollout_body() -> Any:
         Ps.append(Pk)
     inputs, outputs = [x, P, dr, u, J, j, M], [xk, Pk, ca.horzcat(*xs), ca.horzcat(*Ps)]
     if shutil.which("gcc") or shutil.which("cc"):
-        options = {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O2"], "verbose": False}}
+        jit_options = {"flags": ["-O2"], "verbose": False, "directory": jit_directory()}
+        options = {"jit": True, "compiler": "shell", "jit_options": jit_options}
         try:
             return ca.Function("cooperative_steps", inputs, outputs, options)
         except RuntimeError:  # compiler present but unusable: fall back to the virtual machine
@@ -294,3 +297,18 @@ def rollout_casadi(
         nu, S = kalman.innovation(xm, Pm, y, model["C"], model["R"])
         out.update(xm=xm[..., 0], Pm=Pm, nu=nu[..., 0], S=S)
     return out
+
+
+@functools.lru_cache(maxsize=1)
+def jit_directory() -> str:
+    """The user's private folder for CasADi's JIT sources and objects (never the working directory).
+
+    CasADi deletes its files when the compiled function is released; only a killed process leaves some,
+    in the system's temporary folder rather than in the user's project.
+    """
+    import getpass
+    import tempfile
+
+    folder = Path(tempfile.gettempdir()) / f"mobisense-jit-{getpass.getuser()}"
+    folder.mkdir(mode=0o700, exist_ok=True)
+    return str(folder) + os.sep

@@ -54,7 +54,8 @@ MAX_TASKS = 100_000
 class SweepSpec(StrictModel):
     """A sweep: base problem file, expansion mode and the values of each varied key path."""
 
-    base: str = Field(min_length=1, max_length=4096)
+    kind: Literal["sweep"] | None = Field(None, description="file kind (optional: a 'vary' key makes it a sweep)")
+    base: str = Field(min_length=1, max_length=4096, description="the base problem file, relative to the sweep file")
     mode: Literal["grid", "zip"] = "grid"
     vary: dict[str, list[Any]] = Field(min_length=1, max_length=64)
 

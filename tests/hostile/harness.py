@@ -103,6 +103,11 @@ def classify(
     if outcome.code is None:
         outcome.verdict = "hang"
         return outcome
+    if outcome.code == -signal.SIGINT:
+        # Killed by SIGINT after reporting: CPython re-raises SIGINT at exit when a KeyboardInterrupt passed
+        # through C code that ran Python (an import inside an extension), even though mobisense caught it. A
+        # shell reports both as status 130, so the status a user sees is the documented one.
+        outcome.code = 130
     text = outcome.stderr + outcome.stdout
     if "Traceback (most recent call last)" in text or "internal error" in text or outcome.code not in (0, 1, 2, 130):
         outcome.verdict = "traceback"
