@@ -11,16 +11,20 @@ Usage: ``python benchmarks/bench_sweep.py``
 from __future__ import annotations
 
 import statistics
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 from rich.console import Console
 from rich.table import Table
-from tests.problems import hussein2008
 
 from mobisense import Problem
 from mobisense.ocp.batch import nearest_seed, open_client, run_tasks, solve_task
 from mobisense.ocp.direct import clear_transcription_cache, solve_direct
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the repository's tests/ package
+from tests.reference_problems import hussein2008  # noqa: E402
 
 console = Console()
 

@@ -35,10 +35,8 @@ Example
 
 from __future__ import annotations
 
-import functools
-import os
+import importlib.util
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Literal, Protocol
 
 import numpy as np
@@ -52,6 +50,7 @@ from .information_model import (
     transition_matrix,
 )
 from .noise_config import CooperativeNoise
+from .rollouts import OUTPUTS, rollout_casadi, rollout_components, rollout_shared
 
 __all__ = [
     "HessianSource",
@@ -92,25 +91,35 @@ class CooperativeFilterResult:
     ----------
     positions : ndarray, shape (B, K, N, 2) or (K, N, 2)
     centers : ndarray, shape (B, K, 2) or (K, 2)
-    states, states_prior : ndarray, shape (B, K, 3) or (K, 3)
-        Posterior ``s_k(+)`` and predicted ``s_k(−)`` estimates of ``[z, ∂z/∂x, ∂z/∂y]`` at the centre.
-    covariances, covariances_prior : ndarray, shape (B, K, 3, 3) or (K, 3, 3)
-        ``P_k(+)``, ``P_k(−)``; unbatched when the positions are shared by all runs.
-    innovations : ndarray, shape (B, K, N) or (K, N)
-    innovation_covariances : ndarray, shape ([B,] K, N, N)
+    states : ndarray, shape (B, K, 3) or (K, 3)
+        Posterior estimates ``s_k(+)`` of ``[z, ∂z/∂x, ∂z/∂y]`` at the centre.
+    covariances : ndarray, shape (B, K, 3, 3) or (K, 3, 3)
+        ``P_k(+)``; unbatched when the positions are shared by all runs.
     hessians : ndarray, shape ([B,] K, 2, 2)
         The Hessian input used at each step.
+    states_prior, covariances_prior : ndarray or None
+        Predicted ``s_k(−)`` (shape of ``states``) and ``P_k(−)`` (shape of ``covariances``); None when
+        the filter ran with ``outputs="posterior"``.
+    innovations : ndarray, shape (B, K, N) or (K, N), or None
+    innovation_covariances : ndarray, shape ([B,] K, N, N), or None
+    meta : dict
+        ``engine``, ``rollout`` and ``outputs`` used.
+
+    Notes
+    -----
+    The arrays of the numpy engine are views of its time-major storage (not C-contiguous): copy one
+    (``np.ascontiguousarray``) before handing it to code that needs contiguous memory.
     """
 
     positions: np.ndarray
     centers: np.ndarray
     states: np.ndarray
-    states_prior: np.ndarray
     covariances: np.ndarray
-    covariances_prior: np.ndarray
-    innovations: np.ndarray
-    innovation_covariances: np.ndarray
     hessians: np.ndarray
+    states_prior: np.ndarray | None = None
+    covariances_prior: np.ndarray | None = None
+    innovations: np.ndarray | None = None
+    innovation_covariances: np.ndarray | None = None
     meta: dict[str, Any] = field(default_factory=dict)
 
     def nees(self, true_states: np.ndarray) -> np.ndarray:
@@ -120,6 +129,8 @@ class CooperativeFilterResult:
 
     def nis(self) -> np.ndarray:
         """Normalised innovation squared ``ν' S⁻¹ ν`` per run and step, shape ``([B,] K)``."""
+        if self.innovations is None or self.innovation_covariances is None:
+            raise ValueError("nis: this result has no innovations (the filter ran with outputs='posterior')")
         nu = self.innovations
         return np.einsum("...i,...i->...", nu, np.linalg.solve(self.innovation_covariances, nu[..., None])[..., 0])
 
@@ -134,16 +145,17 @@ class CooperativeFilterResult:
             return (lead if array.ndim - len(tail) == len(lead) else ("step",)) + tail
 
         state_names = ["z", "dz_dx", "dz_dy"]
-        data = {
-            "positions": (dims(self.positions, ("platform", "xy")), self.positions),
-            "center": (dims(self.centers, ("xy",)), self.centers),
-            "estimate": (lead + ("state",), self.states),
-            "estimate_prior": (lead + ("state",), self.states_prior),
-            "covariance": (dims(self.covariances, ("state", "state2")), self.covariances),
-            "covariance_prior": (dims(self.covariances_prior, ("state", "state2")), self.covariances_prior),
-            "innovation": (lead + ("platform",), self.innovations),
-            "hessian": (dims(self.hessians, ("xy", "xy2")), self.hessians),
+        tails = {
+            "positions": (self.positions, ("platform", "xy")),
+            "center": (self.centers, ("xy",)),
+            "estimate": (self.states, ("state",)),
+            "estimate_prior": (self.states_prior, ("state",)),
+            "covariance": (self.covariances, ("state", "state2")),
+            "covariance_prior": (self.covariances_prior, ("state", "state2")),
+            "innovation": (self.innovations, ("platform",)),
+            "hessian": (self.hessians, ("xy", "xy2")),
         }
+        data = {name: (dims(a, tail), a) for name, (a, tail) in tails.items() if a is not None}
         ds = xr.Dataset(
             data,
             coords={"state": state_names, "state2": state_names, "xy": ["x", "y"], "xy2": ["x", "y"]},
@@ -159,7 +171,7 @@ class CooperativeKalmanFilter:
     Parameters
     ----------
     noise : CooperativeNoise
-        ``M``, ``R`` and ``U``.
+        ``M``, ``R`` and ``U`` (may be replaced between steps: the attribute is read at every step).
     initial_state : ndarray, shape (..., 3)
         Prior estimate of ``[z, ∇z]`` at the centre of ``initial_positions``.
     initial_covariance : ndarray, shape (..., 3, 3)
@@ -168,11 +180,18 @@ class CooperativeKalmanFilter:
         Platform positions at the first measurement.
     initial_hessian : ndarray, shape (..., 2, 2), optional
         ``Ĥ`` before the first step (zero by default).
+    backend : {"auto", "numba", "numpy"}
+        ``numpy`` evaluates the kernels of :mod:`mobisense.estimation.kalman` on arrays (any batch shape);
+        ``numba`` runs each step as one compiled call (a single filter only: state ``(3,)``, positions
+        ``(N, 2)``; needs ``pip install mobisense[fast]``), ≈ 15x faster per step
+        (:mod:`~mobisense.estimation.cooperative.step_kernels`, equal to round-off); ``auto`` picks numba
+        for a single filter when it is installed, numpy otherwise. The chosen one is ``self.backend``.
 
     Notes
     -----
     Call :meth:`update` at the initial positions first (there is no prediction before it), then
-    :meth:`predict` and :meth:`update` at each new formation position.
+    :meth:`predict` and :meth:`update` at each new formation position. Each step makes new arrays:
+    what :meth:`predict` returned is still the prior after :meth:`update`.
     """
 
     def __init__(
@@ -182,6 +201,7 @@ class CooperativeKalmanFilter:
         initial_covariance: np.ndarray,
         initial_positions: np.ndarray,
         initial_hessian: np.ndarray | None = None,
+        backend: Literal["auto", "numba", "numpy"] = "auto",
     ) -> None:
         self.noise = noise
         self.state = np.asarray(initial_state, dtype=float)[..., None]
@@ -193,6 +213,17 @@ class CooperativeKalmanFilter:
                 f"initial_state/initial_covariance: expected shapes (..., 3) and (..., 3, 3), "
                 f"got {self.state.shape[:-1]} and {self.covariance.shape}"
             )
+        single = (
+            self.state.shape == (3, 1) and self.covariance.shape == (3, 3) and self.positions.ndim == 2
+            and self.hessian.shape == (2, 2)
+        )  # fmt: skip
+        self.backend = _step_backend(backend, single)
+        self._compiled: tuple[Any, Any] | None = None
+        if self.backend == "numba":
+            from .step_kernels import predict_step, update_step
+
+            self._compiled = (predict_step, update_step)
+        self._R0: tuple[CooperativeNoise, np.ndarray] | None = None
 
     def predict(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Move the estimate to the centre of ``positions`` ``(..., N, 2)`` (docs/theory/cooperative.md §2.1).
@@ -202,6 +233,12 @@ class CooperativeKalmanFilter:
         ``(..., 3)`` and covariance ``(..., 3, 3)``.
         """
         positions = np.asarray(positions, dtype=float)
+        if self._compiled is not None:
+            x, P = np.empty((3, 1)), np.empty((3, 3))
+            self._compiled[0](self.state, self.covariance, self.positions, positions, self.hessian,
+                              self.noise.process, x, P)  # fmt: skip
+            self.state, self.covariance, self.positions = x, P, positions
+            return x[:, 0], P
         shift = formation_center(positions) - formation_center(self.positions)
         u = hessian_drift(self.hessian, shift)[..., None]
         self.state, self.covariance = kalman.predict(
@@ -218,6 +255,8 @@ class CooperativeKalmanFilter:
         """
         if hessian is not None:
             self.hessian = np.asarray(hessian, dtype=float)
+        if self._compiled is not None:
+            return self._update_compiled(np.asarray(measurements, dtype=float))
         C, D = taylor_matrices(self.positions)
         y = np.asarray(measurements, dtype=float) - (D @ hessian_to_vec(self.hessian)[..., None])[..., 0]
         self.state, self.covariance, self.innovation, self.innovation_covariance = kalman.update(
@@ -225,6 +264,34 @@ class CooperativeKalmanFilter:
         )
         self.covariance = kalman.symmetrize(self.covariance)
         return self.state[..., 0], self.covariance
+
+    def _update_compiled(self, measurements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        N = self.positions.shape[0]
+        if self.hessian.shape != (2, 2) or measurements.shape != (N,):
+            raise ValueError(
+                f"backend 'numba' filters a single run: expected hessian (2, 2) and measurements ({N},), "
+                f"got {self.hessian.shape} and {measurements.shape} (use backend='numpy' for batches)"
+            )
+        if self._R0 is None or self._R0[0] is not self.noise or self._R0[1].shape[0] != N:
+            self._R0 = (self.noise, np.ascontiguousarray(self.noise.measurement_matrix(N)))
+        x, P, nu, S = np.empty((3, 1)), np.empty((3, 3)), np.empty((N, 1)), np.empty((N, N))
+        self._compiled[1](self.state, self.covariance, self.positions, measurements, self.hessian,
+                          self.noise.hessian_error, self._R0[1], x, P, nu, S)  # fmt: skip
+        self.state, self.covariance, self.innovation, self.innovation_covariance = x, P, nu, S
+        return x[:, 0], P
+
+
+def _step_backend(backend: str, single: bool) -> str:
+    """The step backend to use: numba for a single filter when available (``auto``), else numpy."""
+    if backend not in ("auto", "numba", "numpy"):
+        raise ValueError(f"backend: expected 'auto', 'numba' or 'numpy', got {backend!r}")
+    if backend == "numba":
+        if not single:
+            raise ValueError("backend 'numba' filters a single run (state (3,), positions (N, 2)); use 'numpy'")
+        if importlib.util.find_spec("numba") is None:
+            raise ImportError("backend 'numba' needs numba: pip install 'mobisense[fast]'")
+        return "numba"
+    return "numba" if backend == "auto" and single and importlib.util.find_spec("numba") is not None else "numpy"
 
 
 # ------------------------------------------------------------------------------------------ one shot
@@ -268,119 +335,6 @@ def model_sequence(positions: np.ndarray, hessians: np.ndarray, noise: Cooperati
     }
 
 
-def _rollout_numpy(model: dict[str, np.ndarray], measurements: np.ndarray, x0: np.ndarray, P0: np.ndarray) -> dict:
-    K = measurements.shape[-2]
-    state_batch = np.broadcast_shapes(measurements.shape[:-2], x0.shape[:-1], model["C"].shape[:-3], P0.shape[:-2])
-    covariance_batch = np.broadcast_shapes(model["C"].shape[:-3], P0.shape[:-2])  # data-independent recursion
-    x = np.broadcast_to(x0, state_batch + (3,))[..., None]
-    P = np.broadcast_to(P0, covariance_batch + (3, 3))
-    out: dict[str, list[np.ndarray]] = {k: [] for k in ("xm", "Pm", "x", "P", "nu", "S")}
-    for k in range(K):
-        x, P = kalman.predict(x, P, model["F"][..., k, :, :], model["Q"][..., k, :, :], model["u"][..., k, :, :])
-        out["xm"].append(x[..., 0])
-        out["Pm"].append(P)
-        y = (measurements[..., k, :] - model["DH"][..., k, :])[..., None]
-        x, P, nu, S = kalman.update(x, P, y, model["C"][..., k, :, :], model["R"][..., k, :, :])
-        P = kalman.symmetrize(P)
-        for name, value in (("x", x[..., 0]), ("P", P), ("nu", nu[..., 0]), ("S", S)):
-            out[name].append(value)
-    axis_of = {"xm": -2, "x": -2, "nu": -2, "Pm": -3, "P": -3, "S": -3}
-    return {k: np.stack(v, axis=axis_of[k]) for k, v in out.items()}
-
-
-#: steps per call of the compiled rollout's body (amortises CasADi's per-call overhead)
-_UNROLL = 8
-
-
-@functools.lru_cache(maxsize=1)
-def _rollout_body() -> Any:
-    """:func:`kalman.predict` + :func:`kalman.information_update` for ``_UNROLL`` steps, as a CasADi function.
-
-    Only 3 × 3 algebra is left in the sequential part: the transition is built from ``Δr`` (structural
-    zeros), ``M`` is a constant parameter, and the measurement information ``J_k, j_k`` of all steps is
-    computed beforehand (numpy, vectorised over time). The function is compiled to machine code once
-    per process when a C compiler is on the PATH (CasADi's JIT, ~1 s); otherwise CasADi's virtual
-    machine evaluates it (about 3x slower, same results).
-    """
-    import shutil
-
-    import casadi as ca
-
-    x, P, M = ca.SX.sym("x", 3), ca.SX.sym("P", 3, 3), ca.SX.sym("M", 3, 3)
-    dr, u = ca.SX.sym("dr", 2, _UNROLL), ca.SX.sym("u", 3, _UNROLL)
-    J, j = ca.SX.sym("J", 3, 3 * _UNROLL), ca.SX.sym("j", 3, _UNROLL)
-    xs, Ps = [], []
-    xk, Pk = x, P
-    for i in range(_UNROLL):
-        xk, Pk = kalman.predict(xk, Pk, transition_matrix(dr[:, i]), M, u[:, i])
-        xk, Pk = kalman.information_update(xk, Pk, J[:, 3 * i : 3 * i + 3], j[:, i])
-        xs.append(xk)
-        Ps.append(Pk)
-    inputs, outputs = [x, P, dr, u, J, j, M], [xk, Pk, ca.horzcat(*xs), ca.horzcat(*Ps)]
-    if shutil.which("gcc") or shutil.which("cc"):
-        jit_options = {"flags": ["-O2"], "verbose": False, "directory": _jit_directory()}
-        options = {"jit": True, "compiler": "shell", "jit_options": jit_options}
-        try:
-            return ca.Function("cooperative_steps", inputs, outputs, options)
-        except RuntimeError:  # compiler present but unusable: fall back to the virtual machine
-            pass
-    return ca.Function("cooperative_steps", inputs, outputs)
-
-
-@functools.lru_cache(maxsize=1)
-def _jit_directory() -> str:
-    """The user's private folder for CasADi's JIT sources and objects (never the working directory).
-
-    CasADi deletes its files when the compiled function is released; only a killed process leaves some,
-    in the system's temporary folder rather than in the user's project.
-    """
-    import getpass
-    import tempfile
-
-    folder = Path(tempfile.gettempdir()) / f"mobisense-jit-{getpass.getuser()}"
-    folder.mkdir(mode=0o700, exist_ok=True)
-    return str(folder) + os.sep
-
-
-@functools.lru_cache(maxsize=16)
-def _compiled_rollout(n_chunks: int) -> Any:
-    """``mapaccum`` of :func:`_rollout_body` over ``n_chunks`` calls, accumulating ``(x, P)``."""
-    return _rollout_body().mapaccum("cooperative_rollout", n_chunks, 2)
-
-
-def _hstack(array: np.ndarray) -> np.ndarray:
-    """``(K, n, m)`` matrices → ``[X_0, X_1, …]`` of shape ``(n, K·m)``, CasADi's layout for mapped inputs."""
-    K, n, m = array.shape
-    return np.transpose(array, (1, 0, 2)).reshape(n, K * m)
-
-
-def _rollout_casadi(model: dict[str, np.ndarray], measurements: np.ndarray, x0: np.ndarray, P0: np.ndarray) -> dict:
-    K = measurements.shape[0]
-    y = (measurements - model["DH"])[..., None]
-    J, j = kalman.information_contribution(y, model["C"], model["R"])
-    x_first, P_first = kalman.information_update(x0[:, None], P0, J[0], j[0])  # step 0: no prediction
-    n_chunks = max(1, -(-(K - 1) // _UNROLL))
-    pad = n_chunks * _UNROLL - (K - 1)  # trailing steps without information, discarded
-
-    def padded(a: np.ndarray) -> np.ndarray:
-        return np.concatenate([a[1:], np.zeros((pad,) + a.shape[1:])])
-
-    shifts = model["F"][:, 0, 1:]  # Δr_k from A_k = [[1, Δr'], [0, I]]
-    res = _compiled_rollout(n_chunks)(
-        x_first, P_first, padded(shifts).T, padded(model["u"][..., 0]).T, _hstack(padded(J)),
-        padded(j[..., 0]).T, model["Q"][-1],
-    )  # fmt: skip
-    x = np.concatenate([x_first.T, np.asarray(res[2]).T[: K - 1]])
-    P_all = np.transpose(np.asarray(res[3]).reshape(3, n_chunks * _UNROLL, 3), (1, 0, 2))  # (3, ·3) → (·, 3, 3)
-    P = np.concatenate([P_first[None], P_all[: K - 1]])
-    # priors, innovations and their covariances for all steps at once, with the same kernels
-    x_prev = np.concatenate([x0[None], x[:-1]])[..., None]
-    P_prev = np.concatenate([P0[None], P[:-1]])
-    xm, Pm = kalman.predict(x_prev, P_prev, model["F"], model["Q"], model["u"])
-    nu, S = kalman.innovation(xm, Pm, y, model["C"], model["R"])
-    return {"x": x, "P": P, "xm": xm[..., 0], "Pm": Pm, "nu": nu[..., 0], "S": S}
-
-
 def run_cooperative_filter(
     positions: np.ndarray,
     measurements: np.ndarray,
@@ -390,6 +344,7 @@ def run_cooperative_filter(
     hessians: np.ndarray | HessianSource | None = None,
     engine: Literal["auto", "numpy", "casadi"] = "auto",
     initial_hessian: np.ndarray | None = None,
+    outputs: Literal["all", "posterior"] = "all",
 ) -> CooperativeFilterResult:
     """Run the cooperative Kalman filter over a trajectory (docs/theory/cooperative.md §2, eqs. cooperative.6–9).
 
@@ -408,10 +363,15 @@ def run_cooperative_filter(
         ``Ĥ_{c,k}``: given, estimated in the loop, or zero.
     engine : {"auto", "numpy", "casadi"}
         ``casadi`` compiles the whole rollout (single run, array Hessians only); ``auto`` picks it for
-        a single run and numpy otherwise.
+        a single run and numpy otherwise. With numpy, positions and covariance shared by all runs run
+        the covariance recursion once and the states by eq. cooperative.16; otherwise every run is
+        filtered with its own covariances, all runs at once (:mod:`~mobisense.estimation.cooperative.rollouts`).
     initial_hessian : ndarray, shape ([B,] 2, 2), optional
         Closed loop only: the previous estimate ``Hᵖ`` handed to the source at the first step (zero by
         default). The curvature method keeps the part of ``Hᵖ`` a single snapshot cannot observe.
+    outputs : {"all", "posterior"}
+        ``posterior`` keeps only the states and covariances ``s(+)``, ``P(+)`` (priors and innovations
+        are None): less memory, and 2–4x faster for large batches.
 
     Returns
     -------
@@ -420,6 +380,8 @@ def run_cooperative_filter(
     positions = np.asarray(positions, dtype=float)
     measurements = np.asarray(measurements, dtype=float)
     check_filter_inputs(positions, measurements)
+    if outputs not in OUTPUTS:
+        raise ValueError(f"outputs: expected one of {OUTPUTS}, got {outputs!r}")
     x0 = np.asarray(initial_state, dtype=float)
     P0 = np.asarray(initial_covariance, dtype=float)
     closed_loop = hessians is not None and callable(hessians)
@@ -432,13 +394,18 @@ def run_cooperative_filter(
         H0 = np.zeros((2, 2)) if initial_hessian is None else np.asarray(initial_hessian, dtype=float)
         return _run_closed_loop(positions, measurements, noise, x0, P0, hessians, H0)
     hessian_array = np.zeros(positions.shape[:-2] + (2, 2)) if hessians is None else np.asarray(hessians, float)
-    model = model_sequence(positions, hessian_array, noise)
-    roll = _rollout_casadi if engine == "casadi" else _rollout_numpy
-    out = roll(model, measurements, x0, P0)
+    if engine == "casadi" or (positions.ndim == 3 and P0.ndim == 2):
+        model = model_sequence(positions, hessian_array, noise)
+        roll, rollout = (rollout_casadi, "compiled") if engine == "casadi" else (rollout_shared, "shared")
+        out = roll(model, measurements, x0, P0, outputs)
+        centers = model["centers"]
+    else:
+        out = rollout_components(positions, hessian_array, noise, measurements, x0, P0, outputs)
+        centers, rollout = out["centers"], "components"
     return CooperativeFilterResult(
-        positions=positions, centers=model["centers"], states=out["x"], states_prior=out["xm"],
-        covariances=out["P"], covariances_prior=out["Pm"], innovations=out["nu"],
-        innovation_covariances=out["S"], hessians=hessian_array, meta={"engine": engine},
+        positions=positions, centers=centers, states=out["x"], covariances=out["P"], hessians=hessian_array,
+        states_prior=out.get("xm"), covariances_prior=out.get("Pm"), innovations=out.get("nu"),
+        innovation_covariances=out.get("S"), meta={"engine": engine, "rollout": rollout, "outputs": outputs},
     )  # fmt: skip
 
 
@@ -474,7 +441,7 @@ def _run_closed_loop(
         positions=positions, centers=formation_center(positions), states=stacked["x"],
         states_prior=stacked["xm"], covariances=stacked["P"], covariances_prior=stacked["Pm"],
         innovations=stacked["nu"], innovation_covariances=stacked["S"], hessians=stacked["H"],
-        meta={"engine": "numpy", "hessian_source": type(source).__name__},
+        meta={"engine": "numpy", "rollout": "closed loop", "outputs": "all", "hessian_source": type(source).__name__},
     )  # fmt: skip
 
 

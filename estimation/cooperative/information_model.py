@@ -8,6 +8,11 @@ trajectories ``(B, K, N, 2)`` goes through unchanged.
 State ``s = [z(r_c), ∂z/∂x(r_c), ∂z/∂y(r_c)]`` (field unit, field unit / L); Hessians are stored either
 as ``(..., 2, 2)`` matrices or in the 4-vector form of Zhang & Leonard (2010) ``vec(H) = [H11, H21, H12, H22]`` (eq. 5).
 
+The model functions also take a :class:`~mobisense.estimation.components.ComponentMatrix` (positions
+``(N, 2)``, shifts ``(2, 1)``, Hessians ``(2, 2)``, each entry an array over the batch): the same formulas
+then run on one contiguous array per entry, which is how the filter treats thousands of runs with their
+own trajectories (:mod:`mobisense.estimation.cooperative.rollouts`).
+
 Example
 -------
 >>> import numpy as np
@@ -22,6 +27,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+
+from ..components import ComponentMatrix
 
 __all__ = [
     "formation_center",
@@ -46,13 +53,20 @@ def formation_center(positions: np.ndarray) -> np.ndarray:
 
     Returns
     -------
-    ndarray, shape (..., 2)
+    ndarray, shape (..., 2) (a ``(1, 2)`` component matrix for component positions)
     """
-    return np.mean(positions, axis=-2)
+    if isinstance(positions, ComponentMatrix):
+        n = positions.shape[0]
+        return ComponentMatrix([[sum(row[j] for row in positions.rows) * (1.0 / n) for j in range(2)]])
+    positions = np.asarray(positions, dtype=float)
+    return np.add.reduce(positions, axis=-2) / positions.shape[-2]  # np.mean's arithmetic, without its overhead
 
 
 def relative_positions(positions: np.ndarray) -> np.ndarray:
     """Offsets ``r_i − r_c`` of the platforms from the formation centre, shape ``(..., N, 2)``."""
+    if isinstance(positions, ComponentMatrix):
+        center = formation_center(positions).rows[0]
+        return ComponentMatrix([[row[0] - center[0], row[1] - center[1]] for row in positions.rows])
     positions = np.asarray(positions, dtype=float)
     return positions - formation_center(positions)[..., None, :]
 
@@ -73,6 +87,13 @@ def taylor_matrices(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         Row i is ``½ ((r_i − r_c) ⊗ (r_i − r_c))'`` so that ``D vec(H)`` is the quadratic term (eq. 6).
     """
     dr = relative_positions(positions)
+    if isinstance(dr, ComponentMatrix):  # the same rows, entry by entry
+        C = ComponentMatrix([[1.0, x, y] for x, y in dr.rows])  # docs/theory/cooperative.md, eq. cooperative.2
+        D = []
+        for x, y in dr.rows:
+            xy = 0.5 * x * y  # x y = y x: one array for both entries
+            D.append([0.5 * x * x, xy, xy, 0.5 * y * y])  # docs/theory/cooperative.md, eq. cooperative.2
+        return C, ComponentMatrix(D)
     ones = np.ones(dr.shape[:-1] + (1,))
     C = np.concatenate([ones, dr], axis=-1)  # docs/theory/cooperative.md, eq. cooperative.2
     # docs/theory/cooperative.md, eq. cooperative.2
@@ -84,8 +105,12 @@ def hessian_to_vec(hessian: np.ndarray) -> np.ndarray:
     """``vec(H) = [H11, H21, H12, H22]`` of ``(..., 2, 2)`` matrices, shape ``(..., 4)`` (eq. cooperative.3).
 
     Column-major stacking; for the row-major ``kron(Δr, Δr) = [x², xy, yx, y²]`` used in ``D`` this gives
-    ``D vec(H) = ½ Δr' H Δr`` for any (even non-symmetric) H.
+    ``D vec(H) = ½ Δr' H Δr`` for any (even non-symmetric) H. A ``(2, 2)`` component matrix gives a
+    ``(4, 1)`` one.
     """
+    if isinstance(hessian, ComponentMatrix):
+        (h11, h12), (h21, h22) = hessian.rows
+        return ComponentMatrix([[h11], [h21], [h12], [h22]])
     hessian = np.asarray(hessian, dtype=float)
     return np.swapaxes(hessian, -1, -2).reshape(hessian.shape[:-2] + (4,))
 
@@ -101,14 +126,18 @@ def transition_matrix(center_shift: Any) -> Any:
 
     Parameters
     ----------
-    center_shift : ndarray, shape (..., 2), or CasADi column (2, 1)
+    center_shift : ndarray, shape (..., 2), or CasADi or component column (2, 1)
         ``Δr = r_{c,k} − r_{c,j}`` (L). By Lemma 3.1 the same matrix is the transition ``Φ(k, j)`` for
         any ``k, j`` (either order), so Gramians use it directly.
 
     Returns
     -------
-    ndarray, shape (..., 3, 3), or CasADi (3, 3) with structural zeros and ones
+    ndarray, shape (..., 3, 3), or CasADi or component (3, 3) with structural zeros and ones
     """
+    if isinstance(center_shift, ComponentMatrix):
+        (dx,), (dy,) = center_shift.rows
+        # docs/theory/cooperative.md, eq. cooperative.5
+        return ComponentMatrix([[1.0, dx, dy], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
     if not isinstance(center_shift, (np.ndarray, list, tuple)):  # CasADi symbol: same matrix, symbolically
         import casadi as ca
 
@@ -136,7 +165,13 @@ def hessian_drift(hessian: np.ndarray, center_shift: np.ndarray) -> np.ndarray:
     Zhang & Leonard (2010), eq. 8, propagate the field value to first order only, ``h = [0; H Δr]``, leaving
     ``½ Δr' H Δr`` to the noise ``ε``. We keep that second-order term, known once ``Ĥ`` is: the state
     equation is then exact on quadratic fields (tested), and the two agree to O(‖Δr‖²).
+
+    Component matrices (Hessian ``(2, 2)``, shift ``(2, 1)``) give a ``(3, 1)`` component column.
     """
+    if isinstance(center_shift, ComponentMatrix):
+        Hdr = hessian @ center_shift
+        half_curvature = 0.5 * (center_shift.T @ Hdr)  # docs/theory/cooperative.md, eq. cooperative.5
+        return ComponentMatrix(half_curvature.rows + Hdr.rows)
     center_shift = np.asarray(center_shift, dtype=float)
     Hdr = np.matmul(hessian, center_shift[..., None])[..., 0]
     half_curvature = 0.5 * np.sum(center_shift * Hdr, axis=-1, keepdims=True)  # ½ Δr' H Δr

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...core.config import NonNegativeFloat, PositiveFloat, StrictModel
-from ..kalman import transpose
+from ..kalman import congruence
 
 __all__ = ["CooperativeNoise", "NoiseConfig"]
 
@@ -74,7 +74,7 @@ class CooperativeNoise:
 
     def total_measurement_covariance(self, D: np.ndarray) -> np.ndarray:
         """``D U D' + R`` (docs/theory/cooperative.md §2), shape ``(..., N, N)`` for ``D`` of shape ``(..., N, 4)``."""
-        return D @ self.hessian_error @ transpose(D) + self.measurement_matrix(D.shape[-2])
+        return congruence(D, self.hessian_error) + self.measurement_matrix(D.shape[-2])
 
 
 class NoiseConfig(StrictModel):

@@ -192,6 +192,8 @@ class _Batch:
             self.flush()
 
     def flush(self) -> None:
+        if not self.rows:
+            return
         rows, self.rows = self.rows, []
         self.since = time.monotonic()
         self.store.append(rows)
