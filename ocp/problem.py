@@ -21,7 +21,7 @@ from __future__ import annotations
 import hashlib
 import json
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import BeforeValidator, Field, SerializeAsAny, model_validator
@@ -41,7 +41,7 @@ from ..core.config import (
     parse_config,
 )
 from .noise_models import NoiseModel, parse_noise
-from .registries import BVPSolverName, HomotopyModeName, MethodName, SchemeName
+from .registries import BVPSolverName, HomotopyModeName, MethodName, SchemeName, StrategyName
 
 __all__ = [
     "Horizon",
@@ -134,12 +134,18 @@ class CollocationOptions(StrictModel):
 
 
 class HomotopyOptions(StrictModel):
-    """ε-continuation (docs/theory/direct.md §5.2): ``fixed`` steps of ``step``, ``adaptive`` steps, or ``none``."""
+    """ε-continuation (docs/theory/direct.md §5.2): ``fixed`` steps of ``step``, ``adaptive`` steps, or ``none``.
+
+    ``budget``: the direct method's continuation may take at most ``budget`` × the Ipopt iterations of the
+    cold ε = 1 solve; beyond that it is stopped and the cold solve is kept (docs/theory/direct.md §5.6;
+    ``null``: no limit, and strategy ``homotopy`` runs no cold solve).
+    """
 
     mode: HomotopyModeName = "fixed"
     step: float = Field(0.05, gt=0.0, le=1.0)
     min_step: float = Field(1e-3, gt=0.0, le=1.0)
     growth: float = Field(2.0, ge=1.0, le=10.0)
+    budget: float | None = Field(1.5, gt=0.0, le=1000.0)
 
 
 class BVPOptions(StrictModel):
@@ -172,6 +178,16 @@ class SolverOptions(StrictModel):
     """How to solve: method, transcription, homotopy and Ipopt tolerances."""
 
     method: MethodName = Field("direct", description="direct collocation, indirect (PMP) or both")
+    strategy: StrategyName = Field(
+        "auto", description="direct method: which starts to solve and which optimum to keep (direct.md §5.6)"
+    )
+    starts: int = Field(4, ge=1, le=1000, description="random starts of strategies auto and thorough")
+    agreement: float = Field(
+        1e-6, gt=0.0, lt=1.0, description="relative cost difference under which two optima count as one"
+    )
+    codegen: Literal["auto", "on", "off"] = Field(
+        "auto", description="compile the collocation kernels with the C compiler (cached on disk)"
+    )
     collocation: CollocationOptions = CollocationOptions()
     homotopy: HomotopyOptions = HomotopyOptions()
     bvp: BVPOptions = BVPOptions()

@@ -16,11 +16,13 @@ __all__ = [
     "METHODS",
     "SCHEMES",
     "HOMOTOPY_MODES",
+    "STRATEGIES",
     "BVP_SOLVERS",
     "NOISE_MODELS",
     "MethodName",
     "SchemeName",
     "HomotopyModeName",
+    "StrategyName",
     "BVPSolverName",
 ]
 
@@ -47,6 +49,17 @@ HOMOTOPY_MODES: Registry[Any] = Registry(
     },
 )
 
+#: solver.strategy -> ``(SolveContext) -> (starts run, start kept)`` (docs/theory/direct.md §5.6)
+STRATEGIES: Registry[Any] = Registry(
+    "solve strategy",
+    {
+        "auto": Lazy("mobisense.ocp.direct.strategy:auto_strategy"),
+        "thorough": Lazy("mobisense.ocp.direct.strategy:thorough_strategy"),
+        "homotopy": Lazy("mobisense.ocp.direct.strategy:homotopy_strategy"),
+        "cold": Lazy("mobisense.ocp.direct.strategy:cold_strategy"),
+    },
+)
+
 #: solver.bvp.solver and solver.bvp.refine_solver -> :class:`mobisense.ocp.indirect.bvp_solvers.BVPSolver`
 BVP_SOLVERS: Registry[Any] = Registry(
     "BVP solver",
@@ -70,4 +83,5 @@ NOISE_MODELS: Registry[Any] = Registry(
 MethodName = METHODS.choice()
 SchemeName = SCHEMES.choice()
 HomotopyModeName = HOMOTOPY_MODES.choice()
+StrategyName = STRATEGIES.choice()
 BVPSolverName = BVP_SOLVERS.choice()
