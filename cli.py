@@ -51,14 +51,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (also used by ``python -m``/console script)."""
-    from .core.config import ConfigError
-
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as exit_:  # --help, --version, usage errors: argparse has printed what to say
         return exit_.code if isinstance(exit_.code, int) else 2
+    from .core.config import ConfigError  # after parsing: ``--help`` needs neither pydantic nor numpy
+
     try:
         return int(args.run(args) or 0)
     except ConfigError as err:

@@ -19,12 +19,9 @@ __all__ = [
     "STRATEGIES",
     "BVP_SOLVERS",
     "NOISE_MODELS",
-    "MethodName",
-    "SchemeName",
-    "HomotopyModeName",
-    "StrategyName",
-    "BVPSolverName",
 ]
+# also importable, made on first use (module ``__getattr__`` below): MethodName, SchemeName,
+# HomotopyModeName, StrategyName, BVPSolverName
 
 #: solver.method -> function ``(problem, progress=None, init=None) -> Solution``
 METHODS: Registry[Any] = Registry(
@@ -79,9 +76,19 @@ NOISE_MODELS: Registry[Any] = Registry(
     entry_point_group="mobisense.noise_models",
 )
 
-# the pydantic types of the schema fields that name an entry (validated against the registry at read time)
-MethodName = METHODS.choice()
-SchemeName = SCHEMES.choice()
-HomotopyModeName = HOMOTOPY_MODES.choice()
-StrategyName = STRATEGIES.choice()
-BVPSolverName = BVP_SOLVERS.choice()
+# the pydantic types of the schema fields that name an entry (validated against the registry at read time),
+# made on first use: listing the names (``--help``) does not import pydantic
+_CHOICES = {
+    "MethodName": METHODS,
+    "SchemeName": SCHEMES,
+    "HomotopyModeName": HOMOTOPY_MODES,
+    "StrategyName": STRATEGIES,
+    "BVPSolverName": BVP_SOLVERS,
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _CHOICES:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = globals()[name] = _CHOICES[name].choice()
+    return value

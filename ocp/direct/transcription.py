@@ -326,7 +326,7 @@ class DirectCollocation:
     def pack(self, xs: np.ndarray, xc: np.ndarray, u: np.ndarray, P: np.ndarray) -> np.ndarray:
         """Scaled decision vector from unscaled trajectories (the sensor states at the nodes are implied)."""
         x_scale, u_scale = self._scales(P)
-        k, K, d = self.kernels, self.intervals, self.colloc.degree
+        k, K = self.kernels, self.intervals
         w = np.zeros(self.nw + k.nx)
         w[self.maps.boundary] = np.asarray(xs) / x_scale
         z = np.concatenate([(xc[:, :, : k.ns] / x_scale[: k.ns]).reshape(K, -1), (u / u_scale).reshape(K, -1)], axis=1)
