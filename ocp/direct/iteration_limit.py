@@ -1,7 +1,7 @@
 """An Ipopt iteration callback that stops a solve once an iteration budget is spent.
 
 CasADi fixes Ipopt's ``max_iter`` when the solver is created; the budget of a homotopy that must not cost
-more than a multiple of a cold solve (docs/theory/direct.md §5.5) is known only at run time. Ipopt calls the
+more than a multiple of a cold solve (docs/theory/direct.md §5.6) is known only at run time. Ipopt calls the
 callback after every iteration; when it returns 1, Ipopt stops with ``User_Requested_Stop``.
 """
 
