@@ -163,6 +163,16 @@ class DirectCollocation:
         )
         return load_compiled(functions, key)
 
+    @property
+    def nlp(self) -> dict[str, ca.MX]:
+        """The NLP handed to Ipopt: ``x`` (w, shape (nw,)), ``p`` (P), ``f`` (objective), ``g`` (constraints)."""
+        return self._nlp
+
+    @property
+    def derivatives(self) -> dict[str, ca.Function]:
+        """The assembled ``grad_f(w, P)``, ``jac_g(w, P)``, ``hess_lag(w, P, σ_f, λ_g)`` (upper triangle), for Ipopt."""
+        return self._derivatives
+
     # ------------------------------------------------------------------ solving
     def _solver(self, warm: bool, limited: bool = False) -> Any:
         if (warm, limited) not in self._solvers:
