@@ -14,6 +14,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "atomic_path": "mobisense.core.files",
         "write_json": "mobisense.core.files",
         "write_netcdf": "mobisense.core.files",
+        "write_netcdf_variables": "mobisense.core.files",
         "write_figure": "mobisense.core.files",
         "get_path": "mobisense.core.keypath",
         "set_path": "mobisense.core.keypath",

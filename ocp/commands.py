@@ -21,7 +21,7 @@ class SolveCommand:
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser) -> None:
         """Add the ``solve`` arguments."""
-        from .registries import HOMOTOPY_MODES, METHODS, SCHEMES
+        from .registries import HOMOTOPY_MODES, METHODS, SCHEMES, STRATEGIES
 
         parser.add_argument("problem", type=Path, help="problem YAML file (see problems/hussein2008.yaml)")
         parser.add_argument("--out", type=Path, default=None, help="output folder (default: out/<file name>)")
@@ -35,6 +35,12 @@ class SolveCommand:
             "--homotopy", choices=HOMOTOPY_MODES.names(), default=None, help="override solver.homotopy.mode"
         )
         parser.add_argument("--step", type=float, default=None, help="override solver.homotopy.step (δ)")
+        parser.add_argument(
+            "--strategy",
+            choices=STRATEGIES.names(),
+            default=None,
+            help="override solver.strategy (direct method: which starts to solve, docs/theory/direct.md §5.6)",
+        )
         parser.add_argument("--no-plot", action="store_true", help="skip the figures")
         parser.add_argument("--quiet", action="store_true", help="no progress display or table")
         parser.add_argument(
@@ -87,6 +93,8 @@ def apply_overrides(data: dict[str, Any], args: argparse.Namespace) -> dict[str,
         return data
     if args.method is not None:
         solver["method"] = args.method
+    if args.strategy is not None:
+        solver["strategy"] = args.strategy
     collocation = {
         k: v
         for k, v in (("intervals", args.intervals), ("degree", args.degree), ("scheme", args.scheme))
@@ -133,9 +141,7 @@ class SweepCommand:
         parser.add_argument("sweep", type=Path, help="sweep YAML file (base problem, mode, vary)")
         parser.add_argument("--out", type=Path, default=None, help="output folder (default out/<file name>)")
         parser.add_argument("--scheduler", default=None, help="address of a running dask scheduler (tcp://…)")
-        parser.add_argument(
-            "--workers", type=int, default=None, help="local worker processes (default: one per core)"
-        )
+        parser.add_argument("--workers", type=int, default=None, help="local worker processes (default: one per core)")
         parser.add_argument("--no-warm-start", action="store_true", help="solve every task from the coasting guess")
         parser.add_argument(
             "--time-limit",

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from ..core.files import to_jsonable, write_json, write_netcdf
+from ..core.files import to_jsonable, write_json, write_netcdf_variables
 from .problem import Problem
 from .state_layout import StateLayout
 
@@ -256,6 +256,11 @@ class Solution:
         """Return the solution as an ``xarray.Dataset``."""
         import xarray as xr
 
+        data, coords, attrs = self._dataset_parts()
+        return xr.Dataset(data, coords=coords, attrs=attrs)
+
+    def _dataset_parts(self) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
+        """(data, coords, attrs) of the dataset: variables ``name -> (dims, values, attrs)``, coordinates."""
         names = [s.name for s in self.problem.sensors]
         xy = ["x", "y"]
         n = self.problem.n
@@ -305,7 +310,7 @@ class Solution:
             "control_energy": self.control_energy,
             "conventions": "Sigma/Lam full symmetric matrices; costates of J (minimisation, H = L + lam'f)",
         }
-        return xr.Dataset(data, coords=coords, attrs=attrs)
+        return data, coords, attrs
 
     def to_xarray(self) -> Any:
         """The solution as an ``xarray.Dataset`` (what :meth:`save` writes as ``solution.nc``)."""
@@ -388,7 +393,7 @@ class Solution:
     def save(self, folder: str | Path) -> None:
         """Write ``solution.nc`` and ``summary.json`` into ``folder`` (atomically)."""
         folder = Path(folder)
-        write_netcdf(folder / "solution.nc", self.to_dataset())
+        write_netcdf_variables(folder / "solution.nc", *self._dataset_parts())  # no xarray on the solve path
         write_json(folder / "summary.json", self.summary())
 
     @classmethod
