@@ -40,7 +40,7 @@ from reference_transcription import ReferenceOCP, synthetic_problem
 
 from mobisense import Problem
 from mobisense.ocp import Structure
-from mobisense.ocp.direct import DirectCollocation, coasting_baseline, initial_guess, state_grid
+from mobisense.ocp.direct import DirectCollocation, coasting_start
 
 ROOT = Path(__file__).resolve().parents[1]
 HERE = Path(__file__).resolve().parent
@@ -56,16 +56,6 @@ def load(data: dict[str, Any], K: int, tolerance: float = 1e-9) -> Problem:
     """The problem dict with K Radau-3 intervals."""
     solver = {**data.get("solver", {}), "collocation": {"scheme": "radau", "degree": 3, "intervals": K}}
     return Problem.from_dict({**data, "solver": {**solver, "tolerance": tolerance}})
-
-
-def setup(problem: Problem, tr: DirectCollocation) -> tuple[np.ndarray, np.ndarray]:
-    """(P at ε = 1 with the coasting cost as cost scale, coasting guess) — what ``solve_direct`` starts from."""
-    values = tr.layout.values(problem)
-    t_grid, _ = state_grid(tr, problem.horizon.t0, problem.horizon.tf)
-    coasting = coasting_baseline(problem, t_grid, tr)
-    values["cost_scale"] = max(abs(coasting.cost), 1e-8)
-    P = tr.layout.pack({**values, "eps": 1.0})
-    return P, initial_guess(tr, coasting, P)
 
 
 def cost(tr: DirectCollocation, w: np.ndarray, P: np.ndarray) -> float:
@@ -86,7 +76,7 @@ def periter(configs: list[tuple[int, int, int]], repeats: int, iterations: int) 
         w_ref = ref.coasting_guess()
         problem = load(data, K)
         tr = DirectCollocation(Structure.of(problem), "radau", 3, K, max_iterations=iterations)
-        P, w0 = setup(problem, tr)
+        P, w0 = coasting_start(problem, tr)
         per_it: dict[str, list[float]] = {"ref": [], "mob": []}
         for _ in range(repeats):
             r = ref.solve(w_ref)
@@ -119,7 +109,7 @@ def optimum(configs: list[tuple[str, int]]) -> bool:
         r = ref.solve()
         problem = load(data, K, 1e-10)
         tr = DirectCollocation(Structure.of(problem), "radau", 3, K, tolerance=1e-10)
-        P, _ = setup(problem, tr)
+        P, _ = coasting_start(problem, tr)
         xc = r.x.reshape(K, ref.d, ref.nx)
         xs = np.vstack([ref.x0, xc[:, -1]])
         m = tr.solve(P, tr.pack(xs, xc, r.u.reshape(K, ref.d, -1), P))
@@ -135,15 +125,15 @@ BUILD_SCRIPT = """
 import sys, time
 t0 = time.perf_counter()
 sys.path.insert(0, {here!r})
-from bench_ocp_speed import load, setup
+from bench_ocp_speed import load
 from reference_transcription import synthetic_problem
 from mobisense.ocp import Structure
-from mobisense.ocp.direct import DirectCollocation
+from mobisense.ocp.direct import DirectCollocation, coasting_start
 problem = load(synthetic_problem({n}, {N}, 0), {K})
 t1 = time.perf_counter()
 tr = DirectCollocation(Structure.of(problem), "radau", 3, {K})
 t2 = time.perf_counter()
-P, w0 = setup(problem, tr)
+P, w0 = coasting_start(problem, tr)
 t3 = time.perf_counter()
 r = tr.solve(P, w0, max_iterations=1)
 t4 = time.perf_counter()

@@ -16,7 +16,7 @@ from ..problem import Problem
 from ..simulate import Trajectory, coast, sine_controlled
 from .transcription import DirectCollocation, transcription_for
 
-__all__ = ["state_grid", "initial_guess", "coasting_baseline", "random_guess"]
+__all__ = ["state_grid", "initial_guess", "coasting_baseline", "coasting_start", "random_guess"]
 
 
 def state_grid(tr: DirectCollocation, t0: float, tf: float) -> tuple[np.ndarray, np.ndarray]:
@@ -33,6 +33,19 @@ def coasting_baseline(problem: Problem, t_eval: np.ndarray, tr: DirectCollocatio
     tr = tr or transcription_for(problem)
     P = tr.layout.pack(tr.layout.values(problem))
     return coast(tr.model, P, t_eval)
+
+
+def coasting_start(problem: Problem, tr: DirectCollocation, eps: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """(P at ``eps``, coasting guess w0): the parameters and start of a cold solve, as :func:`solve_direct` makes them.
+
+    The cost scale is the coasting cost (docs/theory/direct.md §1.3).
+    """
+    values = tr.layout.values(problem)
+    t_grid, _ = state_grid(tr, problem.horizon.t0, problem.horizon.tf)
+    coasting = coast(tr.model, tr.layout.pack(values), t_grid)
+    values["cost_scale"] = max(abs(coasting.cost), 1e-8)
+    P = tr.layout.pack({**values, "eps": eps})
+    return P, initial_guess(tr, coasting, P)
 
 
 def initial_guess(
@@ -76,5 +89,3 @@ def random_guess(
     u = u.reshape(tr.intervals, tr.colloc.degree, nu)
     # the scaling of w does not depend on cost_scale (set inside solve_direct), so this P packs it correctly
     return initial_guess(tr, trajectory, P, u)
-
-

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from reference_problems import coupled_two_sensor
 
-from mobisense.ocp.direct.guesses import coasting_baseline, initial_guess, state_grid
+from mobisense.ocp.direct.guesses import coasting_start
 from mobisense.ocp.direct.transcription import DirectCollocation
 from mobisense.ocp.model import Structure
 from mobisense.ocp.problem import Problem
@@ -43,20 +43,11 @@ def _bounded_problem(K: int) -> Problem:
     return Problem.from_dict(data)
 
 
-def _parameters(problem: Problem, tr: DirectCollocation) -> tuple[np.ndarray, np.ndarray]:
-    values = tr.layout.values(problem)
-    t_grid, _ = state_grid(tr, problem.horizon.t0, problem.horizon.tf)
-    coasting = coasting_baseline(problem, t_grid, tr)
-    values["cost_scale"] = max(abs(coasting.cost), 1e-8)
-    P = tr.layout.pack({**values, "eps": 0.7})
-    return P, initial_guess(tr, coasting, P)
-
-
 @pytest.mark.parametrize("scheme", ["radau", "legendre"])
 def test_assembled_derivatives_equal_casadi_differentiation_of_the_nlp(scheme):
     problem = _bounded_problem(3)
     tr = DirectCollocation(Structure.of(problem), scheme, 3, 3, codegen="off")
-    P, w0 = _parameters(problem, tr)
+    P, w0 = coasting_start(problem, tr, eps=0.7)
     rng = np.random.default_rng(0)
     w = w0 + 0.1 * rng.standard_normal(tr.nw)  # off the guess: every term of the Hessian is active
     lam_f, lam_g = 0.8, rng.standard_normal(tr.ng)
@@ -102,8 +93,7 @@ def test_optimum_equals_the_independent_plain_transcription():
         assert r.success, r.status
         problem = Problem.from_dict({**data, "solver": {**data["solver"], "tolerance": 1e-11}})
         tr = DirectCollocation(Structure.of(problem), "radau", 3, K, tolerance=1e-11)
-        P, _ = _parameters(problem, tr)
-        P = tr.layout.pack({**tr.layout.unpack(P), "eps": 1.0})
+        P, _ = coasting_start(problem, tr)
         xc = r.x.reshape(K, ref.d, ref.nx)
         w = tr.pack(np.vstack([ref.x0, xc[:, -1]]), xc, r.u.reshape(K, ref.d, -1), P)
         mine = tr.solve(P, w)
