@@ -1,8 +1,8 @@
 """Solve strategies of the direct method: which starts are solved, which optimum is kept (docs/theory/direct.md §5.6).
 
 The NLP has many local optima: from the coasting guess, from the end of the ε-continuation and from random
-starts Ipopt lands on different ones, 0.1–8 % apart, and none of the starts is reliably the best
-(benchmarks/bench_strategy.py). ``solver.strategy`` chooses:
+starts Ipopt lands on different ones, up to 10 % apart (48 % for one homotopy), and none of the starts is reliably
+the best (benchmarks/bench_ocp_quality.py, benchmarks/RESULTS.md). ``solver.strategy`` chooses:
 
 ``auto`` (default)
     a cold ε = 1 solve, then the continuation of ``solver.homotopy`` within ``budget`` × the cold solve's
