@@ -100,12 +100,12 @@ class ComparedSolution(Solution):
 
     indirect: Solution | None = None
 
-    def to_dataset(self) -> Any:
-        """The direct dataset plus ``indirect_*`` variables on their own ``time_indirect`` axis."""
-        ds = super().to_dataset()
+    def dataset_parts(self) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
+        """The direct dataset's parts plus ``indirect_*`` variables on their own ``time_indirect`` axis."""
+        data, coords, attrs = super().dataset_parts()
         other = self.indirect
         if other is None:
-            return ds
+            return data, coords, attrs
         dims = {
             "Sigma": ("time_indirect", "row", "col"),
             "p": ("time_indirect", "sensor", "xy"),
@@ -115,10 +115,11 @@ class ComparedSolution(Solution):
             "lam_p": ("time_indirect", "sensor", "xy"),
             "lam_v": ("time_indirect", "sensor", "xy"),
         }
-        ds = ds.assign_coords(time_indirect=other.t)
+        coords = {**coords, "time_indirect": other.t}
+        data = dict(data)
         for name, dim in dims.items():
-            ds[f"indirect_{name}"] = (dim, getattr(other, name), {"long_name": f"{name} of the indirect solution"})
-        return ds
+            data[f"indirect_{name}"] = (dim, getattr(other, name), {"long_name": f"{name} of the indirect solution"})
+        return data, coords, attrs
 
 
 def _bvp_block(bvp: BVPSolution, solver: str, time_s: float) -> dict[str, Any]:

@@ -256,10 +256,10 @@ class Solution:
         """Return the solution as an ``xarray.Dataset``."""
         import xarray as xr
 
-        data, coords, attrs = self._dataset_parts()
+        data, coords, attrs = self.dataset_parts()
         return xr.Dataset(data, coords=coords, attrs=attrs)
 
-    def _dataset_parts(self) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
+    def dataset_parts(self) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
         """(data, coords, attrs) of the dataset: variables ``name -> (dims, values, attrs)``, coordinates."""
         names = [s.name for s in self.problem.sensors]
         xy = ["x", "y"]
@@ -393,7 +393,7 @@ class Solution:
     def save(self, folder: str | Path) -> None:
         """Write ``solution.nc`` and ``summary.json`` into ``folder`` (atomically)."""
         folder = Path(folder)
-        write_netcdf_variables(folder / "solution.nc", *self._dataset_parts())  # no xarray on the solve path
+        write_netcdf_variables(folder / "solution.nc", *self.dataset_parts())  # no xarray on the solve path
         write_json(folder / "summary.json", self.summary())
 
     @classmethod
