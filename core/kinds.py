@@ -17,8 +17,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .config import ConfigError
-
 __all__ = ["FileKind", "FILE_KINDS", "detect_kind", "kind_model", "check_file", "load_target"]
 
 
@@ -106,6 +104,8 @@ def detect_kind(data: Any, source: str | Path) -> str:
     ConfigError
         Not a mapping, an unknown ``kind``, or a shape that fits no kind or several.
     """
+    from .config import ConfigError  # here: listing the kinds (``--help``) must not import pydantic
+
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: (top level): expected a mapping of keys, got {type(data).__name__}")
     names = sorted(FILE_KINDS)
