@@ -89,9 +89,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _main(argv: Sequence[str] | None, said: list[str]) -> int:
-    from .core.errors import ComputationError, ConfigError, OutputError, one_line
-    from .core.netcdf import recorded_command
-
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     try:
@@ -103,6 +100,9 @@ def _main(argv: Sequence[str] | None, said: list[str]) -> int:
 
     # overflow/invalid-value warnings of intermediate steps are not messages: results are checked for NaN/inf
     errors = np.seterr(all="ignore")
+    from .core.errors import ComputationError, ConfigError, OutputError, one_line  # after parsing: ``--help``
+    from .core.netcdf import recorded_command  # needs neither pydantic nor numpy
+
     try:
         with recorded_command(argv):  # the "history" of every netCDF file written
             return int(args.run(args) or 0)

@@ -17,9 +17,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .config import ConfigError
-from .errors import brief
-
 __all__ = ["FileKind", "FILE_KINDS", "detect_kind", "kind_model", "check_file", "load_target"]
 
 
@@ -107,6 +104,9 @@ def detect_kind(data: Any, source: str | Path) -> str:
     ConfigError
         Not a mapping, an unknown ``kind``, or a shape that fits no kind or several.
     """
+    from .config import ConfigError  # here: listing the kinds (``--help``) must not import pydantic
+    from .errors import brief
+
     if data is None:
         raise ConfigError(f"{source}: (top level): the file is empty; expected a mapping of keys")
     if not isinstance(data, dict):

@@ -17,8 +17,6 @@ from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Annotated, Any, Generic, TypeVar
 
-from pydantic import AfterValidator, Field
-
 __all__ = ["Lazy", "Registry"]
 
 T = TypeVar("T")
@@ -123,6 +121,7 @@ class Registry(Mapping[str, T], Generic[T]):
 
     def choice(self) -> Any:
         """The pydantic type of a string field naming an entry (JSON schema: an ``enum`` of the names)."""
+        from pydantic import AfterValidator, Field  # here: listing names (``--help``) must not import pydantic
 
         def enum(schema: dict[str, Any]) -> None:
             self._scan_entry_points()

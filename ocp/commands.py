@@ -24,7 +24,7 @@ class SolveCommand:
         """Add the ``solve`` arguments."""
         from ..core.budget import add_budget_argument
         from .batch.cluster import add_cluster_arguments, positive_int
-        from .registries import HOMOTOPY_MODES, METHODS, SCHEMES
+        from .registries import HOMOTOPY_MODES, METHODS, SCHEMES, STRATEGIES
 
         parser.add_argument(
             "problem", type=Path, help="problem YAML file, or the name of a shipped example (mobisense examples)"
@@ -40,6 +40,12 @@ class SolveCommand:
             "--homotopy", choices=HOMOTOPY_MODES.names(), default=None, help="override solver.homotopy.mode"
         )
         parser.add_argument("--step", type=float, default=None, help="override solver.homotopy.step (δ)")
+        parser.add_argument(
+            "--strategy",
+            choices=STRATEGIES.names(),
+            default=None,
+            help="override solver.strategy (direct method: which starts to solve, docs/theory/direct.md §5.6)",
+        )
         parser.add_argument("--no-plot", action="store_true", help="skip the figures")
         parser.add_argument("--quiet", action="store_true", help="no progress display or table")
         parser.add_argument(
@@ -126,6 +132,8 @@ def apply_overrides(data: dict[str, Any], args: argparse.Namespace) -> dict[str,
         return data
     if args.method is not None:
         solver["method"] = args.method
+    if args.strategy is not None:
+        solver["strategy"] = args.strategy
     collocation = {
         k: v
         for k, v in (("intervals", args.intervals), ("degree", args.degree), ("scheme", args.scheme))

@@ -29,8 +29,6 @@ from __future__ import annotations
 
 from typing import Any, ClassVar, Literal
 
-import casadi as ca
-
 from ..core.config import InvalidValue, PositiveFloat, StrictModel
 from .registries import NOISE_MODELS
 
@@ -78,6 +76,8 @@ class QuadraticRange(NoiseModel):
     @staticmethod
     def variance(p: Any, s: Any, theta: Any) -> Any:
         """``beta * |p - s|^2 + gamma`` (docs/theory/ocp.md, eq. ocp.4)."""
+        import casadi as ca  # here: validating a file must not import CasADi
+
         return theta[0] * ca.sumsqr(p - s) + theta[1]
 
 

@@ -46,7 +46,7 @@ from ..core.config import (
 )
 from ..core.units import LengthUnit, PhysicalUnit, TimeUnit, UnitSystem
 from .noise_models import NoiseModel, parse_noise
-from .registries import BVPSolverName, HomotopyModeName, MethodName, SchemeName
+from .registries import BVPSolverName, HomotopyModeName, MethodName, SchemeName, StrategyName
 
 __all__ = [
     "Units",
@@ -181,12 +181,17 @@ class HomotopyOptions(StrictModel):
 
     ``step`` ≥ 10⁻⁴ (at most 10⁴ fixed steps); ``adaptive`` halves a failed step down to ``min_step`` ≥ 10⁻⁶
     and makes at most :data:`mobisense.ocp.homotopy.MAX_ATTEMPTS` attempts.
+
+    ``budget``: the direct method's continuation may take at most ``budget`` × the Ipopt iterations of the
+    cold ε = 1 solve; beyond that it is stopped and the cold solve is kept (docs/theory/direct.md §5.6;
+    ``null``: no limit, and strategy ``homotopy`` runs no cold solve).
     """
 
     mode: HomotopyModeName = "fixed"
     step: float = Field(0.05, ge=MIN_HOMOTOPY_STEP, le=1.0)
     min_step: float = Field(1e-3, ge=1e-6, le=1.0)
     growth: float = Field(2.0, ge=1.0, le=10.0)
+    budget: float | None = Field(1.5, gt=0.0, le=1000.0)
 
     @model_validator(mode="after")
     def _steps(self) -> HomotopyOptions:
@@ -227,6 +232,16 @@ class SolverOptions(StrictModel):
     """How to solve: method, transcription, homotopy and Ipopt tolerances."""
 
     method: MethodName = Field("direct", description="direct collocation, indirect (PMP) or both")
+    strategy: StrategyName = Field(
+        "auto", description="direct method: which starts to solve and which optimum to keep (direct.md §5.6)"
+    )
+    starts: int = Field(4, ge=1, le=1000, description="random starts of strategies auto and thorough")
+    agreement: float = Field(
+        1e-6, gt=0.0, lt=1.0, description="relative cost difference under which two optima count as one"
+    )
+    codegen: Literal["auto", "on", "off"] = Field(
+        "auto", description="compile the collocation kernels with the C compiler (cached on disk)"
+    )
     collocation: CollocationOptions = CollocationOptions()
     homotopy: HomotopyOptions = HomotopyOptions()
     bvp: BVPOptions = BVPOptions()

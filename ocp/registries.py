@@ -16,13 +16,12 @@ __all__ = [
     "METHODS",
     "SCHEMES",
     "HOMOTOPY_MODES",
+    "STRATEGIES",
     "BVP_SOLVERS",
     "NOISE_MODELS",
-    "MethodName",
-    "SchemeName",
-    "HomotopyModeName",
-    "BVPSolverName",
 ]
+# also importable, made on first use (module ``__getattr__`` below): MethodName, SchemeName,
+# HomotopyModeName, StrategyName, BVPSolverName
 
 #: solver.method -> function ``(problem, progress=None, init=None) -> Solution``
 METHODS: Registry[Any] = Registry(
@@ -47,6 +46,17 @@ HOMOTOPY_MODES: Registry[Any] = Registry(
     },
 )
 
+#: solver.strategy -> ``(SolveContext) -> (starts run, start kept)`` (docs/theory/direct.md §5.6)
+STRATEGIES: Registry[Any] = Registry(
+    "solve strategy",
+    {
+        "auto": Lazy("mobisense.ocp.direct.strategy:auto_strategy"),
+        "thorough": Lazy("mobisense.ocp.direct.strategy:thorough_strategy"),
+        "homotopy": Lazy("mobisense.ocp.direct.strategy:homotopy_strategy"),
+        "cold": Lazy("mobisense.ocp.direct.strategy:cold_strategy"),
+    },
+)
+
 #: solver.bvp.solver and solver.bvp.refine_solver -> :class:`mobisense.ocp.indirect.bvp_solvers.BVPSolver`
 BVP_SOLVERS: Registry[Any] = Registry(
     "BVP solver",
@@ -66,8 +76,19 @@ NOISE_MODELS: Registry[Any] = Registry(
     entry_point_group="mobisense.noise_models",
 )
 
-# the pydantic types of the schema fields that name an entry (validated against the registry at read time)
-MethodName = METHODS.choice()
-SchemeName = SCHEMES.choice()
-HomotopyModeName = HOMOTOPY_MODES.choice()
-BVPSolverName = BVP_SOLVERS.choice()
+# the pydantic types of the schema fields that name an entry (validated against the registry at read time),
+# made on first use: listing the names (``--help``) does not import pydantic
+_CHOICES = {
+    "MethodName": METHODS,
+    "SchemeName": SCHEMES,
+    "HomotopyModeName": HOMOTOPY_MODES,
+    "StrategyName": STRATEGIES,
+    "BVPSolverName": BVP_SOLVERS,
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _CHOICES:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = globals()[name] = _CHOICES[name].choice()
+    return value

@@ -1,7 +1,9 @@
-"""Integrate the sensor + Riccati dynamics for a given control with ``solve_ivp`` (independent of the NLP).
+"""Integrate the sensor + Riccati dynamics for a given control (independent of the NLP).
 
-Used for the ε → 0 initial guess (coasting sensors, u ≡ 0: the classical Kalman filter), for the
-no-control baseline cost, and to re-simulate an optimised control as an independent check.
+:func:`integrate` (scipy's DOP853, any control) re-simulates an optimised control as an independent check;
+:func:`coast` (u ≡ 0: the classical Kalman filter; the ε → 0 initial guess and the no-control baseline) and
+:func:`sine_controlled` (the random smooth controls of multi-start guesses) run CasADi's CVODES in
+compiled code, one integrator per model and output grid, built once per process.
 """
 
 from __future__ import annotations
@@ -13,11 +15,10 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from .model import SensorKalmanModel
 
-__all__ = ["Trajectory", "integrate", "coast"]
+__all__ = ["Trajectory", "integrate", "coast", "sine_controlled"]
 
 
 @dataclass
@@ -61,6 +62,8 @@ def integrate(
     -------
     Trajectory
     """
+    from scipy.integrate import solve_ivp
+
     nx, nu = model.structure.nx, model.structure.nu
     x_scale = np.asarray(model.scales(P)[0]).ravel()
     f = model.f
@@ -90,44 +93,51 @@ def integrate(
 
 
 @functools.lru_cache(maxsize=32)
-def _coasting_integrator(model: SensorKalmanModel, grid: tuple[float, ...], rtol: float) -> ca.Function:
-    """CVODES integrator of the scaled coasting dynamics over normalised time τ ∈ [0, 1] (output at ``grid``)."""
+def _integrator(model: SensorKalmanModel, grid: tuple[float, ...], rtol: float, modes: int) -> ca.Function:
+    """CVODES integrator of the scaled dynamics over normalised time τ ∈ [0, 1] (output at ``grid``).
+
+    The control is ``u(τ) = Σ_m a_m sin(mπτ + φ_m)``, m = 1 … ``modes`` (none: coasting); the integrator's
+    parameter is ``[P; vec(a); vec(φ)]`` with a, φ of shape (modes, nu) flattened row-major.
+    """
     s = model.structure
     xs = ca.SX.sym("x_scaled", s.nx)
+    tau = ca.SX.sym("tau")
     P = ca.SX.sym("P", model.layout.size)
+    a = ca.SX.sym("a", modes * s.nu)
+    phase = ca.SX.sym("phase", modes * s.nu)
     b = model.layout.unpack(P)
     horizon = b["tf"] - b["t0"]
     x_scale, _ = model.scales(P)
     u = ca.SX.zeros(s.nu)
+    for m in range(modes):
+        u += a[m * s.nu : (m + 1) * s.nu] * ca.sin((m + 1) * np.pi * tau + phase[m * s.nu : (m + 1) * s.nu])
     x = xs * x_scale
     dae = {
         "x": xs,
-        "p": P,
+        "t": tau,
+        "p": ca.vertcat(P, a, phase),
         "ode": horizon * model.f(x, u, P) / x_scale,
         "quad": horizon * model.running(x, u, P),
     }
     options = {"abstol": rtol, "reltol": rtol, "disable_internal_warnings": True}
-    return ca.integrator("coasting", "cvodes", dae, 0.0, list(grid), options)
+    return ca.integrator("sensor_riccati", "cvodes", dae, 0.0, list(grid), options)
 
 
-def coast(model: SensorKalmanModel, P: np.ndarray, t_eval: np.ndarray, rtol: float = 1e-13) -> Trajectory:
-    """The coasting (u ≡ 0) solution — the classical Kalman filter — with CasADi's CVODES, at ``t_eval``.
-
-    Same result as ``integrate(model, P, t_eval)`` (BDF at rtol 1e-13: cost within 2e-10 of DOP853 at 1e-13,
-    tested) but in compiled code: it runs for every
-    solve (initial guess, baseline cost), so it must be cheap. ``t_eval`` must start at t0 and end at tf.
-    """
+def _run(
+    model: SensorKalmanModel, P: np.ndarray, t_eval: np.ndarray, rtol: float, a: np.ndarray, phase: np.ndarray
+) -> Trajectory:
     b = model.layout.unpack(np.asarray(P, float))
     t0, tf = float(b["t0"][0]), float(b["tf"][0])
     grid = tuple(float(v) for v in (np.asarray(t_eval, float)[1:] - t0) / (tf - t0))
     x_scale = np.asarray(model.scales(P)[0]).ravel()
     x0 = np.asarray(model.x0(P)).ravel()
+    F = _integrator(model, grid, rtol, a.shape[0])
     try:
-        out = _coasting_integrator(model, grid, rtol)(x0=x0 / x_scale, p=P)
+        out = F(x0=x0 / x_scale, p=np.concatenate([P, a.ravel(), phase.ravel()]))
     except RuntimeError as exc:
         status = re.search(r'CVode returned "(\w+)"', str(exc))
         raise RuntimeError(
-            f"integrating the no-control Riccati equation failed (CVODES {status.group(1) if status else 'error'}): "
+            f"integrating the Riccati equation failed (CVODES {status.group(1) if status else 'error'}): "
             "the covariance dynamics are too stiff or their numbers too extreme; rescale the problem"
         ) from None
     x = np.vstack([x0, np.asarray(out["xf"]).T * x_scale])
@@ -139,3 +149,32 @@ def coast(model: SensorKalmanModel, P: np.ndarray, t_eval: np.ndarray, rtol: flo
         running_cost=float(q[0]),
         control_energy=float(q[1]),
     )
+
+
+def coast(model: SensorKalmanModel, P: np.ndarray, t_eval: np.ndarray, rtol: float = 1e-13) -> Trajectory:
+    """The coasting (u ≡ 0) solution — the classical Kalman filter — with CasADi's CVODES, at ``t_eval``.
+
+    Same result as ``integrate(model, P, t_eval)`` (BDF at rtol 1e-13: cost within 2e-10 of DOP853 at 1e-13,
+    tested) but in compiled code: it runs for every
+    solve (initial guess, baseline cost), so it must be cheap. ``t_eval`` must start at t0 and end at tf.
+    """
+    nu = model.structure.nu
+    return _run(model, P, t_eval, rtol, np.zeros((0, nu)), np.zeros((0, nu)))
+
+
+def sine_controlled(
+    model: SensorKalmanModel,
+    P: np.ndarray,
+    t_eval: np.ndarray,
+    amplitudes: np.ndarray,
+    phases: np.ndarray,
+    rtol: float = 1e-10,
+) -> Trajectory:
+    """The trajectory of ``u(t) = Σ_m a_m sin(mπτ + φ_m)``, τ = (t − t0)/(tf − t0), with CVODES, at ``t_eval``.
+
+    Parameters
+    ----------
+    amplitudes, phases : ndarray, shape (modes, nu)
+        a_m (L/T²) and φ_m (rad) of each mode m = 1 … modes.
+    """
+    return _run(model, P, t_eval, rtol, np.asarray(amplitudes, float), np.asarray(phases, float))

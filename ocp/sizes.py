@@ -49,7 +49,7 @@ def direct_estimate(problem: Problem, intervals: int | None = None) -> Estimate:
     """Peak memory of :func:`mobisense.ocp.direct.solver.solve_direct` on ``problem``."""
     c = problem.solver.collocation
     K = intervals or c.intervals
-    size = transcription_size(Structure.of(problem), c.degree, K)
+    size = transcription_size(Structure.of(problem), c.degree, K, c.scheme)
     solvers = 1.0 if problem.solver.homotopy.mode == "none" else 1.7  # the warm solver: 1.6× measured
     nonzeros = size.jacobian_nnz + size.hessian_nnz
     need = solvers * (BYTES_PER_NODE * size.expression_nodes + BYTES_PER_NONZERO * nonzeros)

@@ -14,6 +14,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "initial_guess": "mobisense.ocp.direct.guesses",
         "state_grid": "mobisense.ocp.direct.guesses",
         "coasting_baseline": "mobisense.ocp.direct.guesses",
+        "coasting_start": "mobisense.ocp.direct.guesses",
         "random_guess": "mobisense.ocp.direct.guesses",
         "clear_transcription_cache": "mobisense.ocp.direct.transcription",
     },

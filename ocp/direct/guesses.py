@@ -4,8 +4,8 @@ Every guess is a scaled decision vector of :class:`~mobisense.ocp.direct.transcr
 a trajectory sampled on the state grid (every interval start and collocation node) and controls at the
 collocation nodes. :func:`random_guess` is a smooth random control ``u(t) = Σ_m a_m sin(mπ τ + φ_m)``
 (τ the normalised time, amplitudes of the order of the problem's control scale) with the states it
-produces (integrated with ``solve_ivp``), so it satisfies the dynamics and only the optimality differs
-(multi-start).
+produces (integrated with CVODES, :func:`~mobisense.ocp.simulate.sine_controlled`), so it satisfies the
+dynamics and only the optimality differs (multi-start).
 """
 
 from __future__ import annotations
@@ -13,10 +13,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..problem import Problem
-from ..simulate import Trajectory, coast, integrate
+from ..simulate import Trajectory, coast, sine_controlled
 from .transcription import DirectCollocation, transcription_for
 
-__all__ = ["state_grid", "initial_guess", "coasting_baseline", "random_guess"]
+__all__ = ["state_grid", "initial_guess", "coasting_baseline", "coasting_start", "random_guess"]
 
 
 def state_grid(tr: DirectCollocation, t0: float, tf: float) -> tuple[np.ndarray, np.ndarray]:
@@ -37,6 +37,19 @@ def coasting_baseline(problem: Problem, t_eval: np.ndarray, tr: DirectCollocatio
     return coast(tr.model, P, t_eval)
 
 
+def coasting_start(problem: Problem, tr: DirectCollocation, eps: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """(P at ``eps``, coasting guess w0): the parameters and start of a cold solve, as :func:`solve_direct` makes them.
+
+    The cost scale is the coasting cost (docs/theory/direct.md §1.3).
+    """
+    values = tr.layout.values(problem)
+    t_grid, _ = state_grid(tr, problem.horizon.t0, problem.horizon.tf)
+    coasting = coast(tr.model, tr.layout.pack(values), t_grid)
+    values["cost_scale"] = max(abs(coasting.cost), 1e-8)
+    P = tr.layout.pack({**values, "eps": eps})
+    return P, initial_guess(tr, coasting, P)
+
+
 def initial_guess(
     tr: DirectCollocation, trajectory: Trajectory, P: np.ndarray, u: np.ndarray | None = None
 ) -> np.ndarray:
@@ -53,9 +66,14 @@ def initial_guess(
     return tr.pack(x_all[: K + 1], x_all[K + 1 :].reshape(K, d, -1), u, P)
 
 
-def random_guess(problem: Problem, seed: int, amplitude: float = 3.0, modes: int = 3) -> np.ndarray:
-    """A scaled decision vector of a random smooth control and its trajectory (see module docstring)."""
-    tr = transcription_for(problem)
+def random_guess(
+    problem: Problem, seed: int, amplitude: float = 3.0, modes: int = 3, tr: DirectCollocation | None = None
+) -> np.ndarray:
+    """A scaled decision vector of a random smooth control and its trajectory (see module docstring).
+
+    ``tr`` is the transcription to pack it for (default: :func:`transcription_for` of ``problem``).
+    """
+    tr = tr or transcription_for(problem)
     values = tr.layout.values(problem)
     P = tr.layout.pack(values)
     rng = np.random.default_rng(seed)
@@ -65,16 +83,11 @@ def random_guess(problem: Problem, seed: int, amplitude: float = 3.0, modes: int
     a = amplitude * u_scale * rng.standard_normal((modes, nu))
     phase = rng.uniform(0, 2 * np.pi, (modes, nu))
     m = np.arange(1, modes + 1)[:, None]
-
-    def control(t: float) -> np.ndarray:
-        tau = (t - t0) / (tf - t0)
-        return (a * np.sin(m * np.pi * tau + phase)).sum(axis=0)
-
     _, nodes = tr.times(t0, tf)
     t_grid, _ = state_grid(tr, t0, tf)
-    trajectory = integrate(tr.model, P, t_grid, control=control, rtol=1e-8)
-    u = np.array([control(t) for t in nodes.ravel()]).reshape(tr.intervals, tr.colloc.degree, nu)
+    trajectory = sine_controlled(tr.model, P, t_grid, a, phase)
+    tau = (nodes.ravel() - t0) / (tf - t0)
+    u = (a[None] * np.sin(m[None] * np.pi * tau[:, None, None] + phase[None])).sum(axis=1)
+    u = u.reshape(tr.intervals, tr.colloc.degree, nu)
     # the scaling of w does not depend on cost_scale (set inside solve_direct), so this P packs it correctly
     return initial_guess(tr, trajectory, P, u)
-
-

@@ -1,69 +1,28 @@
-"""Solve the mobile-sensor Kalman problem by direct collocation with ε-continuation (docs/theory/direct.md §5).
+"""Solve the mobile-sensor Kalman problem by direct collocation (docs/theory/direct.md §5).
 
 ``solve_direct(problem)`` builds (or reuses) the transcription for the problem's structure and grid,
-starts from the ε → 0 limit (coasting sensors, Σ from the Riccati IVP), continues in ε with primal and
-dual warm starts, and returns a :class:`~mobisense.ocp.solution.Solution` — complete, or up to the last ε
-solved with ``status="failed"`` and the worst-violated constraint named in problem terms.
+computes the ε → 0 limit (coasting sensors, Σ from the Riccati IVP) as the initial guess and baseline, runs
+the problem's solve strategy (:mod:`mobisense.ocp.direct.strategy`: cold solve, ε-continuation with
+primal–dual warm starts, random starts) and returns a :class:`~mobisense.ocp.solution.Solution` — complete,
+or up to the last ε solved with ``status="failed"`` and the worst-violated constraint named in problem terms.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from ..homotopy import run_continuation
 from ..problem import Problem
 from ..simulate import Trajectory, coast
 from ..solution import HomotopyStep, Solution, SolveStatus, StartKind
 from .guesses import initial_guess, state_grid
+from .strategy import Continuation, SolveContext, run_strategy
 from .transcription import DirectCollocation, NLPResult, transcription_for
 
 __all__ = ["solve_direct"]
-
-
-@dataclass
-class _Continuation:
-    """The state of one ε-continuation: the accepted primal–dual point, every step, the accepted path."""
-
-    tr: DirectCollocation
-    values: dict[str, Any]
-    w: np.ndarray
-    progress: Callable[[HomotopyStep], None] | None = None
-    lam_w: np.ndarray | None = None
-    lam_g: np.ndarray | None = None
-    result: NLPResult | None = None  # the last accepted result
-    eps: float = 0.0  # the last accepted ε
-    failed: NLPResult | None = None  # the last failed result
-    steps: list[HomotopyStep] = field(default_factory=list)
-    path: list[tuple[float, np.ndarray]] = field(default_factory=list)
-
-    def parameters(self, eps: float) -> np.ndarray:
-        """The NLP parameter vector at ``eps``."""
-        return self.tr.layout.pack({**self.values, "eps": eps})
-
-    def attempt(self, eps: float) -> bool:
-        """Solve at ``eps`` from the accepted point; accept it if Ipopt converged."""
-        P = self.parameters(eps)
-        result = self.tr.solve(P, self.w, self.lam_w, self.lam_g)
-        phi, running, _ = (float(v) for v in self.tr.cost_terms(result.w, P))
-        step = HomotopyStep(eps, phi + running / eps, result.iterations, result.status, result.time_s, result.success)
-        self.steps.append(step)
-        if self.progress is not None:
-            self.progress(step)
-        if result.success:
-            self.w, self.lam_w, self.lam_g, self.result, self.eps = result.w, result.lam_w, result.lam_g, result, eps
-            self.path.append((eps, result.w))
-        else:
-            self.failed = result
-        return result.success
-
-    def restart(self, w: np.ndarray, lam_w: np.ndarray | None = None, lam_g: np.ndarray | None = None) -> None:
-        """Continue from another primal (and dual) point."""
-        self.w, self.lam_w, self.lam_g = w, lam_w, lam_g
 
 
 def _worst_violation(tr: DirectCollocation, result: NLPResult, problem: Problem) -> dict[str, Any]:
@@ -119,40 +78,47 @@ def solve_direct(
     # the NLP objective is J / cost_scale = O(1): the scale follows the cost however small (M SPD makes it > 0);
     # an absolute floor would make tiny-cost problems (M = 1e-40) optimise the control energy alone
     values["cost_scale"] = max(abs(coasting.cost), 1e-300)
-    w0 = initial_guess(tr, coasting, tr.layout.pack(values))
-    run = _Continuation(tr, values, w0, progress)
+    ctx = SolveContext(problem, tr, values, initial_guess(tr, coasting, tr.layout.pack(values)), progress)
 
-    stats: dict[str, Any] = {"build_time_s": tr.build_time_s, "nlp_variables": tr.nw, "nlp_constraints": tr.ng}
-    eps_reached = 0.0
+    stats: dict[str, Any] = {
+        "build_time_s": tr.build_time_s,
+        "nlp_variables": tr.nw,
+        "nlp_constraints": tr.ng,
+        "kernels": tr.kernel_mode,
+    }
+    kept: Continuation | None = None
     if init is not None:
-        start = _start_from_solution(init, run)
+        warm = ctx.start("warm start")
+        start = _start_from_solution(init, warm)
         stats["start"] = start
         if start is StartKind.WARM:
-            eps_reached = 1.0 if run.attempt(1.0) else 0.0
-            if eps_reached < 1.0:
+            if warm.attempt(1.0):
+                kept = warm
+            else:
                 stats["start"] = StartKind.WARM_FAILED
-                run.restart(w0)
     elif guess is not None:
         stats["start"] = StartKind.GUESS
-        run.restart(np.asarray(guess, float))
-        eps_reached = 1.0 if run.attempt(1.0) else 0.0
-    if eps_reached < 1.0 and guess is None:
-        eps_reached = run_continuation(run.attempt, problem.solver.homotopy)
-    solved = eps_reached == 1.0
+        kept = ctx.start("guess", np.asarray(guess, float))
+        kept.attempt(1.0)
+    if kept is None:
+        kept, stats["strategy"] = run_strategy(ctx)
+    solved = kept.solved
     message = "converged at ε = 1"
-    if not solved and run.failed is not None:
-        worst = _worst_violation(tr, run.failed, problem)
+    if "strategy" in stats and len(stats["strategy"]["starts"]) > 1:
+        message += f" ({kept.label} kept, the best of {len(stats['strategy']['starts'])} starts)"
+    if not solved and kept.failed is not None:
+        worst = _worst_violation(tr, kept.failed, problem)
         stats["worst_violation"] = worst
         message = (
-            f"Ipopt returned {run.failed.status} at ε = {run.steps[-1].eps:g}; last ε solved = {eps_reached:g}; "
+            f"Ipopt returned {kept.failed.status} at ε = {kept.steps[-1].eps:g}; last ε solved = {kept.eps:g}; "
             f"worst-violated constraint: {worst['constraint']} at t = {worst['time']:.4g} "
             f"(violation {worst['violation']:.3g})"
         )
     stats["total_time_s"] = time.perf_counter() - t_start
-    return _assemble(problem, run, coasting, order, solved, message, stats)
+    return _assemble(problem, kept, coasting, order, solved, message, stats)
 
 
-def _start_from_solution(init: Solution | dict[str, Any], run: _Continuation) -> StartKind:
+def _start_from_solution(init: Solution | dict[str, Any], run: Continuation) -> StartKind:
     """Load ``init``'s primal–dual point into ``run`` if its NLP has the same layout; say what happened."""
     nlp = init.nlp if isinstance(init, Solution) else init
     if nlp is None or (isinstance(init, Solution) and init.eps != 1.0):
@@ -166,7 +132,7 @@ def _start_from_solution(init: Solution | dict[str, Any], run: _Continuation) ->
 
 def _assemble(
     problem: Problem,
-    run: _Continuation,
+    run: Continuation,
     coasting: Trajectory,
     order: np.ndarray,
     solved: bool,
@@ -199,7 +165,7 @@ def _assemble(
         lam=lam,
         path_eps=np.array([e for e, _ in run.path]) if run.path else None,
         path_x=np.stack([on_grid(w) for _, w in run.path]) if run.path else None,
-        homotopy=run.steps,
+        homotopy=run.ctx.steps,
         baseline={
             "cost": coasting.cost,
             "terminal_cost": coasting.terminal_cost,

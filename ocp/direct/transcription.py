@@ -1,13 +1,13 @@
-"""Direct-collocation transcription of the mobile-sensor Kalman problem into an Ipopt NLP (built once).
+"""Direct-collocation transcription of the mobile-sensor Kalman problem into an NLP (docs/theory/direct.md §1).
 
-Decision vector, interval by interval (scaled variables, O(1)):
-``w = [x_0, X_0, U_0, x_1, X_1, U_1, …, x_K]`` with ``x_k`` (nx,) the state at the start of interval k,
-``X_k`` (nx, d) the states at the d collocation nodes and ``U_k`` (nu, d) the controls there.
-Constraints: collocation equations (d per interval), continuity ``x_{k+1} = x_end(k)``, the initial
-state, fixed terminal states, control-norm bounds. Objective: the cost multiplied by ε,
-``ε Tr[MΣ(tf)] + ∫ L`` (same minimiser as J_ε, well scaled as ε → 0), divided by ``cost_scale``.
-Every number is a parameter (:class:`mobisense.ocp.model.ParameterLayout`), so the homotopy and parameter
-sweeps re-solve the same graph: one SX kernel per interval, mapped over the intervals, expanded.
+The decision vector holds, interval by interval, the scaled covariance at the d collocation nodes, the
+scaled controls there and the state the interval hands to the next (:mod:`mobisense.ocp.direct.kernels`:
+Radau's duplicated end states are eliminated, the linear sensor dynamics are solved exactly, x̃_0 is a
+parameter). Constraints: gap rows tying the intervals together, collocation equations of σ, control
+bounds, fixed terminal states. Objective: ``(ε Tr[MΣ(tf)] + ∫ L) / cost_scale``. Every number is a
+parameter (:class:`mobisense.ocp.model.ParameterLayout`), so the homotopy and sweeps re-solve one NLP,
+whose exact derivatives are assembled from per-interval kernels (:mod:`mobisense.ocp.direct.assembly`),
+compiled and cached on disk when a C compiler is available (:mod:`mobisense.ocp.direct.kernel_cache`).
 """
 
 from __future__ import annotations
@@ -20,10 +20,16 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from .. import collocation, model, noise_models, state_layout
 from ..collocation import CollocationScheme
 from ..model import SensorKalmanModel, Structure
 from ..problem import Problem
-from ..state_layout import diagonal_indices
+from ..registries import NOISE_MODELS
+from . import kernels as kernels_module
+from .assembly import assemble, index_maps, with_step
+from .iteration_limit import IterationLimit
+from .kernel_cache import load_compiled, source_digest
+from .kernels import IntervalKernels, condensing_matrices
 
 __all__ = [
     "DirectCollocation",
@@ -31,6 +37,8 @@ __all__ = [
     "IPOPT_DEFAULTS",
     "COLD_START",
     "WARM_START",
+    "CODEGEN_MODES",
+    "AUTO_COMPILE_INSTRUCTIONS",
     "transcription_for",
     "transcription_cache_hits",
     "clear_transcription_cache",
@@ -38,24 +46,23 @@ __all__ = [
     "transcription_size",
 ]
 
-#: Ipopt options used by default. MUMPS' matching-based permutation and scaling are switched off and the
-#: fill-reducing ordering is AMD: on these banded collocation KKT systems that is the fastest combination
-#: measured (benchmarks/bench_direct.py: default problem and K up to 400; every homotopy step re-runs the
-#: symbolic analysis, where METIS, MUMPS' automatic choice, costs most).
+#: Ipopt options used by default: MUMPS without its matching-based permutation and scaling, AMD ordering
+#: (fastest measured on these banded KKT systems) and a workspace of 20 % over MUMPS' estimate instead of
+#: Ipopt's 1000 % (allocating 11x the estimate at every factorisation cost 1.3x per iteration).
 IPOPT_DEFAULTS: dict[str, Any] = {
     "linear_solver": "mumps",
     "mumps_permuting_scaling": 0,
     "mumps_scaling": 0,
     "mumps_pivot_order": 0,
+    "mumps_mem_percent": 20,
     "print_level": 0,
     "sb": "yes",
 }
 
-#: Extra options for the cold first step: the coasting guess is feasible and near-optimal for small ε, so a
-#: smaller initial barrier than Ipopt's 0.1 saves iterations (default problem: 19 instead of 34).
+#: Extra options of a cold solve (from the coasting guess).
 COLD_START: dict[str, Any] = {"mu_init": 1e-2}
 
-#: Extra options for warm-started homotopy steps (primal and dual variables supplied).
+#: Extra options of warm-started solves (primal and dual variables supplied).
 WARM_START: dict[str, Any] = {
     "warm_start_init_point": "yes",
     "mu_init": 1e-8,
@@ -65,6 +72,11 @@ WARM_START: dict[str, Any] = {
     "warm_start_slack_bound_frac": 1e-9,
     "warm_start_mult_bound_push": 1e-9,
 }
+
+#: ``solver.codegen``: compile the kernels ``on`` (always), ``off`` (never) or ``auto`` (when small)
+CODEGEN_MODES = ("auto", "on", "off")
+#: ``auto`` compiles kernels up to this many SX instructions in all (n = 4, N = 4: 133 000, 12 s once)
+AUTO_COMPILE_INSTRUCTIONS = 250_000
 
 
 @dataclass
@@ -99,21 +111,30 @@ class TranscriptionSize:
     expression_nodes: int
 
 
-def transcription_size(structure: Structure, degree: int, intervals: int) -> TranscriptionSize:
-    """The :class:`TranscriptionSize` of the transcription of ``structure`` on ``intervals`` intervals of ``degree``."""
+def transcription_size(structure: Structure, degree: int, intervals: int, scheme: str = "radau") -> TranscriptionSize:
+    """The :class:`TranscriptionSize` of the transcription of ``structure`` on ``intervals`` intervals of ``degree``.
+
+    The layout is the eliminated one of docs/theory/direct.md §1.7 (eq. direct.2): per interval σ and u at the
+    d nodes plus what the interval hands on — the sensors' (p, v) at its end with Radau, the whole state with
+    Legendre (no node at τ = 1).
+    """
     s, d, K = structure, degree, intervals
     n, N, nx, nu, ns = s.n, s.N, s.nx, s.nu, s.n_sigma
     nodes = K * d
     bounded = sum(s.bounded_control)
     terminal = 2 * (sum(s.fixed_position) + sum(s.fixed_velocity))
-    variables = K * (nx + nx * d + nu * d) + nx
-    constraints = nodes * nx + K * nx + nx + terminal + nodes * bounded
-    # a covariance residual depends on its node's slope (d + 1 values), a row and a column of Σ and every
-    # sensor position (through S(p)); a position/velocity residual on its slope and one velocity/control
-    jacobian = nodes * (ns * (d + 1 + 2 * n + 2 * N) + 4 * N * (d + 2) + 2 * bounded) + K * nx * (d + 2) + nx + terminal
-    # Σ S(p) Σ couples every pair of covariance entries (S is a parameter, dense), and each sensor's
-    # position with every covariance entry; controls enter quadratically
-    hessian = nodes * (ns * (ns + 1) // 2 + 2 * N * ns + 5 * N)
+    handed_on = 4 * N if scheme == "radau" else nx
+    variables = K * (d * ns + d * nu + handed_on)
+    constraints = K * (handed_on + d * ns + d * bounded) + terminal
+    # the sensors are condensed (eq. direct.11): a position at a node is a function of the interval's handed-on
+    # (p, v) and all d controls, m = 4 + 2d values per sensor. A covariance residual depends on its entry at the
+    # d + 1 values of the interval, a row and a column of Σ, and those m values of every sensor; a handed-on row on
+    # its d + 1 values and its own variable (+ one for the velocity coupling); a bound row on one node's control
+    m = 4 + 2 * d
+    jacobian = nodes * ns * (d + 1 + 2 * n + N * m) + K * handed_on * (d + 3) + 2 * nodes * bounded + 2 * terminal
+    # Σ S(p) Σ couples the covariance entries of a node; each sensor's m values couple with each other and with
+    # every covariance entry at the d nodes (lower triangle)
+    hessian = K * (N * (m * (m + 1) // 2 + d * ns * m) + d * ns * (ns + 1) // 2)
     expression = nodes * (30 + 4 * d * nx + (180 * n**2 + 60) * N + 12 * n**3 + 24 * ns**2)
     return TranscriptionSize(variables, constraints, jacobian, hessian, expression)
 
@@ -132,6 +153,12 @@ class DirectCollocation:
         Number of collocation intervals K (uniform).
     ipopt_options : dict, optional
         Overrides of :data:`IPOPT_DEFAULTS` (without the ``ipopt.`` prefix).
+    tolerance : float
+        Ipopt ``tol``.
+    max_iterations : int
+        Ipopt ``max_iter`` of each solve.
+    codegen : {"auto", "on", "off"}
+        Compile the interval kernels (cached on disk; see :mod:`mobisense.ocp.direct.kernel_cache`).
     """
 
     def __init__(
@@ -143,120 +170,95 @@ class DirectCollocation:
         ipopt_options: dict[str, Any] | None = None,
         tolerance: float = 1e-9,
         max_iterations: int = 500,
+        codegen: str = "auto",
     ) -> None:
         t_build = time.perf_counter()
-        self.structure = s = structure
+        if codegen not in CODEGEN_MODES:
+            raise ValueError(f"codegen: expected one of {CODEGEN_MODES}, got {codegen!r}")
+        self.structure = structure
         self.model = SensorKalmanModel(structure)
         self.layout = self.model.layout
         self.colloc = CollocationScheme(scheme, degree)
         self.intervals = K = intervals
         self.ipopt_options = {**IPOPT_DEFAULTS, "tol": tolerance, "max_iter": max_iterations, **(ipopt_options or {})}
-        nx, nu, d = s.nx, s.nu, degree
-        self._index(nx, nu, d, K)
-
-        kernel = self._interval_kernel()
-        mapped = kernel.map(K, "serial")
-        w = ca.MX.sym("w", self.nw)
-        P = ca.MX.sym("P", self.layout.size)
-        xs = ca.reshape(w[self.idx_xs.ravel(order="F").tolist()], nx, K + 1)
-        Xc = ca.reshape(w[self.idx_xc.ravel(order="F").tolist()], nx * d, K)
-        U = ca.reshape(w[self.idx_u.ravel(order="F").tolist()], nu * d, K)
-        res, x_end, quad, ubound = mapped(xs[:, :K], Xc, U, P)
-        x_scale, _ = self.model.scales(P)
-        b = self.layout.unpack(P)
-        x_final = xs[:, K] * x_scale
-        terminal_res, terminal_labels = self.model.terminal_constraints(x_final, P)
-        g = ca.vertcat(
-            ca.vec(res),
-            ca.vec(xs[:, 1:] - x_end),
-            xs[:, 0] - self.model.x0(P) / x_scale,
-            terminal_res,
-            ca.vec(ubound),
-        )
-        running = ca.sum2(quad[0, :])
-        energy = ca.sum2(quad[1, :])
-        phi = self.model.terminal(x_final, P)
-        objective = (b["eps"] * phi + running) / b["cost_scale"]
-        self._nlp_function = ca.Function("nlp", [w, P], [objective, g]).expand()
-        self.cost_terms = ca.Function("cost_terms", [w, P], [phi, running, energy]).expand()
-        self._n_bound = ubound.size1() * ubound.size2()
-        self.ng = g.size1()
-        self._terminal_labels = terminal_labels
-        self._solvers: dict[bool, Any] = {}
+        self.kernels = k = IntervalKernels(self.model, self.colloc, "eliminated")
+        self.functions, self.kernel_mode = self._kernel_functions(codegen)
+        self.maps = index_maps(k, K)
+        self.nw = self.maps.nw
+        nlp = assemble(k, self.functions, self.maps, K)
+        self._nlp, self._derivatives, self.cost_terms, self.ng = nlp.nlp, nlp.derivatives, nlp.cost_terms, nlp.ng
+        self._nodes = k.k_nodes.map(K, "serial")
+        self._pv_gradient = k.k_pv.map(K, "serial")
+        self._solvers: dict[tuple[bool, bool], Any] = {}
+        self._limit: IterationLimit | None = None
         self._bounds = self._make_bounds()
         self.build_time_s = time.perf_counter() - t_build
 
-    # ------------------------------------------------------------------ layout
-    def _index(self, nx: int, nu: int, d: int, K: int) -> None:
-        per_interval = nx + nx * d + nu * d
-        start = np.arange(K) * per_interval
-        self.idx_xs = np.concatenate([start[:, None] + np.arange(nx), [K * per_interval + np.arange(nx)]]).T
-        self.idx_xc = (start[:, None] + nx + np.arange(nx * d)).T  # (nx*d, K), node-major
-        self.idx_u = (start[:, None] + nx + nx * d + np.arange(nu * d)).T  # (nu*d, K)
-        self.nw = K * per_interval + nx
-
-    def _interval_kernel(self) -> ca.Function:
-        """SX kernel of one interval: collocation residuals, end state, quadratures, control bounds."""
-        s, c, m = self.structure, self.colloc, self.model
-        nx, nu, d = s.nx, s.nu, c.degree
-        x_start = ca.SX.sym("x_start", nx)
-        Xc = ca.SX.sym("Xc", nx * d)
-        U = ca.SX.sym("U", nu * d)
-        P = ca.SX.sym("P", self.layout.size)
-        b = self.layout.unpack(P)
-        h = (b["tf"] - b["t0"]) / self.intervals
-        x_scale, u_scale = m.scales(P)
-        nodes = [x_start] + [Xc[r * nx : (r + 1) * nx] for r in range(d)]
-        residuals, quad_L, quad_E, bounds = [], 0, 0, []
-        for r in range(d):
-            u_r = U[r * nu : (r + 1) * nu] * u_scale
-            x_r = nodes[r + 1] * x_scale
-            slope = sum(c.D[j, r] * nodes[j] for j in range(d + 1))
-            residuals.append(slope - h * m.f(x_r, u_r, P) / x_scale)
-            L = m.running(x_r, u_r, P)
-            quad_L += h * c.W[r] * L[0]
-            quad_E += h * c.W[r] * L[1]
-            bound, _ = m.control_bounds(u_r, P)
-            bounds.append(bound)
-        x_end = sum(c.E[j] * nodes[j] for j in range(d + 1))
-        return ca.Function(
-            "interval",
-            [x_start, Xc, U, P],
-            [ca.vertcat(*residuals), x_end, ca.vertcat(quad_L, quad_E), ca.vertcat(*bounds)],
-            ["x_start", "Xc", "U", "P"],
-            ["residual", "x_end", "quad", "bound"],
+    def _kernel_functions(self, codegen: str) -> tuple[dict[str, ca.Function], str]:
+        functions = self.kernels.functions
+        size = sum(f.n_instructions() for f in functions.values())
+        if codegen == "off" or (codegen == "auto" and size > AUTO_COMPILE_INSTRUCTIONS):
+            return functions, f"virtual machine (codegen {codegen}, {size} instructions)"
+        sources = [collocation, model, noise_models, state_layout, kernels_module]
+        sources += [NOISE_MODELS[name] for name in sorted(set(self.structure.noise_models))]
+        digest = source_digest(sources)
+        if digest is None:
+            return functions, "virtual machine (a noise model has no source file to fingerprint)"
+        c = self.colloc
+        key = "|".join(
+            [repr(self.structure), c.scheme, str(c.degree), self.kernels.layout, digest, self.kernels.fingerprint()]
         )
+        return load_compiled(functions, key)
+
+    @property
+    def nlp(self) -> dict[str, ca.MX]:
+        """The NLP handed to Ipopt: ``x`` (w, shape (nw,)), ``p`` (P), ``f`` (objective), ``g`` (constraints)."""
+        return self._nlp
+
+    @property
+    def derivatives(self) -> dict[str, ca.Function]:
+        """The assembled ``grad_f(w, P)``, ``jac_g(w, P)``, ``hess_lag(w, P, σ_f, λ_g)`` (upper triangle), for Ipopt."""
+        return self._derivatives
 
     # ------------------------------------------------------------------ solving
-    def _solver(self, warm: bool) -> Any:
-        if warm not in self._solvers:
-            w = ca.SX.sym("w", self.nw)
-            P = ca.SX.sym("P", self.layout.size)
-            f, g = self._nlp_function(w, P)
+    def _solver(self, warm: bool, limited: bool = False) -> Any:
+        if (warm, limited) not in self._solvers:
             options = {**(WARM_START if warm else COLD_START), **self.ipopt_options}
-            self._solvers[warm] = ca.nlpsol(
+            extra: dict[str, Any] = {}
+            if limited:
+                if self._limit is None:
+                    self._limit = IterationLimit(self.nw, self.ng, self.layout.size)
+                extra["iteration_callback"] = self._limit
+            self._solvers[(warm, limited)] = ca.nlpsol(
                 "direct_collocation",
                 "ipopt",
-                {"x": w, "p": P, "f": f, "g": g},
-                {"ipopt": options, "print_time": False, "error_on_fail": False},
+                self._nlp,
+                {
+                    **self._derivatives,
+                    **extra,
+                    "ipopt": options,
+                    "print_time": False,
+                    "error_on_fail": False,
+                    "calc_lam_p": False,
+                    "no_nlp_grad": True,
+                },
             )
-        return self._solvers[warm]
+        return self._solvers[(warm, limited)]
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(lbw, ubw, lbg, ubg): diagonal covariance entries ≥ 0, equalities, control bounds ≤ 0 (read-only)."""
         return self._bounds
 
     def _make_bounds(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        k, K = self.kernels, self.intervals
         lbw = np.full(self.nw, -np.inf)
         ubw = np.full(self.nw, np.inf)
-        nx, d = self.structure.nx, self.colloc.degree
-        diag = diagonal_indices(self.structure.n)
-        lbw[self.idx_xs[diag].ravel()] = 0.0
-        lbw[self.idx_xc[[r * nx + k for r in range(d) for k in diag]].ravel()] = 0.0
+        lbw[self.maps.local[:, k.diagonal_positions()].ravel()] = 0.0
         lbg = np.zeros(self.ng)
         ubg = np.zeros(self.ng)
-        if self._n_bound:
-            lbg[-self._n_bound :] = -np.inf
+        if k.n_bound:
+            bound_rows = np.arange(K)[:, None] * k.nr + k.n_gap + k.n_path + np.arange(k.n_bound)
+            lbg[bound_rows.ravel()] = -np.inf
         for array in (lbw, ubw, lbg, ubg):
             array.setflags(write=False)
         return lbw, ubw, lbg, ubg
@@ -267,10 +269,18 @@ class DirectCollocation:
         w0: np.ndarray,
         lam_w0: np.ndarray | None = None,
         lam_g0: np.ndarray | None = None,
+        max_iterations: int | None = None,
     ) -> NLPResult:
-        """Solve the NLP for parameters ``P`` from ``w0``; warm-started when multipliers are given."""
+        """Solve the NLP for parameters ``P`` from ``w0``; warm-started when multipliers are given.
+
+        ``max_iterations`` stops this solve after that many Ipopt iterations (status ``User_Requested_Stop``),
+        on top of the transcription's ``max_iter``.
+        """
         warm = lam_w0 is not None and lam_g0 is not None
-        solver = self._solver(warm)
+        limited = max_iterations is not None
+        solver = self._solver(warm, limited)
+        if limited and self._limit is not None:
+            self._limit.reset(max_iterations)
         lbw, ubw, lbg, ubg = self.bounds()
         args: dict[str, Any] = {"x0": w0, "p": P, "lbx": lbw, "ubx": ubw, "lbg": lbg, "ubg": ubg}
         if warm:
@@ -295,28 +305,33 @@ class DirectCollocation:
     @property
     def signature(self) -> tuple:
         """What must match for two NLPs to share decision-vector and multiplier layouts."""
-        return (self.structure, self.colloc.scheme, self.colloc.degree, self.intervals)
+        return (self.structure, self.colloc.scheme, self.colloc.degree, self.intervals, self.kernels.layout)
+
+    def _scales(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return tuple(np.asarray(v).ravel() for v in self.model.scales(P))  # type: ignore[return-value]
 
     def variable_scales(self, P: np.ndarray) -> np.ndarray:
         """Physical size of one unit of each decision variable, shape (nw,)."""
-        x_scale, u_scale = (np.asarray(v).ravel() for v in self.model.scales(P))
+        x_scale, u_scale = self._scales(P)
+        k, d = self.kernels, self.colloc.degree
         out = np.empty(self.nw)
-        out[self.idx_xs] = x_scale[:, None]
-        out[self.idx_xc] = np.tile(x_scale, self.colloc.degree)[:, None]
-        out[self.idx_u] = np.tile(u_scale, self.colloc.degree)[:, None]
+        out[self.maps.z] = np.concatenate([np.tile(x_scale[: k.ns], d), np.tile(u_scale, d)])[None, :]
+        out[self.maps.nxt] = x_scale[-k.nn :][None, :]
         return out
 
     def constraint_scales(self, P: np.ndarray) -> np.ndarray:
         """Physical size of one unit of each constraint residual, shape (ng,)."""
         b = self.layout.unpack(np.asarray(P, float))
-        x_scale = np.asarray(self.model.scales(P)[0]).ravel()
-        d, K = self.colloc.degree, self.intervals
+        x_scale, _ = self._scales(P)
+        k, d = self.kernels, self.colloc.degree
+        interval = np.concatenate(
+            [x_scale[-k.nn :], np.tile(x_scale[: k.ns], d), np.full(k.n_bound, float(b["control_scale"][0]) ** 2)]
+        )
         terminal = [
             float(b["length_scale"][0]) if kind.startswith("terminal position") else float(b["velocity_scale"][0])
-            for kind, _ in self._terminal_labels
+            for kind, _ in k.terminal_labels
         ]
-        bounds = np.full(self._n_bound, float(b["control_scale"][0]) ** 2)
-        return np.concatenate([np.tile(x_scale, d * K), np.tile(x_scale, K), x_scale, terminal, bounds])
+        return np.concatenate([np.tile(interval, self.intervals), terminal])
 
     def transfer(
         self, w: np.ndarray, lam_w: np.ndarray, lam_g: np.ndarray, P_from: np.ndarray, P_to: np.ndarray
@@ -324,8 +339,8 @@ class DirectCollocation:
         """Re-express a primal–dual point of the NLP with parameters ``P_from`` in the scaling of ``P_to``.
 
         Physical values are kept: ``x = D_x w``, constraint multipliers ``μ = ν cost_scale / s_g`` and bound
-        multipliers ``z = ζ cost_scale / D_x`` (the KKT conditions are invariant under these maps), so a
-        solved neighbour of a sweep is an exact warm start for a problem whose scales differ.
+        multipliers ``z = ζ cost_scale / D_x`` (the KKT conditions are invariant under these maps, eq. direct.8),
+        so a solved neighbour of a sweep is an exact warm start for a problem whose scales differ.
         """
         cs_from = float(self.layout.unpack(np.asarray(P_from, float))["cost_scale"][0])
         cs_to = float(self.layout.unpack(np.asarray(P_to, float))["cost_scale"][0])
@@ -344,62 +359,87 @@ class DirectCollocation:
         starts = t0 + h * np.arange(self.intervals + 1)
         return starts, starts[:-1, None] + h * self.colloc.tau[None, 1:]
 
+    def _extended(self, w: np.ndarray, P: np.ndarray) -> np.ndarray:
+        """``[w; x̃_0]``: local positions ≥ nw refer to the scaled initial state (a parameter)."""
+        return np.concatenate([np.asarray(w, float), np.asarray(self.kernels.x0_scaled(P)).ravel()])
+
+    def _local(self, w: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The local vectors (na, K) and the kernels' parameter input (n_parameters + 1, K)."""
+        P = np.asarray(P, float)
+        Ph = np.repeat(with_step(P, self.kernels, self.intervals)[:, None], self.intervals, axis=1)
+        return self._extended(w, P)[self.maps.local].T, Ph
+
     def unpack(self, w: np.ndarray, P: np.ndarray) -> dict[str, np.ndarray]:
         """Unscaled states at starts ``xs`` (K+1, nx) and nodes ``xc`` (K, d, nx); controls ``u`` (K, d, nu)."""
-        x_scale, u_scale = (np.asarray(v).ravel() for v in self.model.scales(P))
-        nx, nu, d, K = self.structure.nx, self.structure.nu, self.colloc.degree, self.intervals
-        xs = w[self.idx_xs].T * x_scale
-        xc = w[self.idx_xc].T.reshape(K, d, nx) * x_scale
-        u = w[self.idx_u].T.reshape(K, d, nu) * u_scale
-        return {"xs": xs, "xc": xc, "u": u}
+        x_scale, _ = self._scales(P)
+        s, d, K = self.structure, self.colloc.degree, self.intervals
+        xc, u = (np.asarray(v) for v in self._nodes(*self._local(w, P)))
+        return {
+            "xs": self._extended(w, P)[self.maps.boundary] * x_scale,
+            "xc": xc.reshape(s.nx, K, d).transpose(1, 2, 0),
+            "u": u.reshape(s.nu, K, d).transpose(1, 2, 0),
+        }
 
     def pack(self, xs: np.ndarray, xc: np.ndarray, u: np.ndarray, P: np.ndarray) -> np.ndarray:
-        """Inverse of :meth:`unpack`: scaled decision vector from unscaled trajectories."""
-        x_scale, u_scale = (np.asarray(v).ravel() for v in self.model.scales(P))
-        K = self.intervals
-        w = np.empty(self.nw)
-        w[self.idx_xs] = (xs / x_scale).T
-        w[self.idx_xc] = (xc / x_scale).reshape(K, -1).T
-        w[self.idx_u] = (u / u_scale).reshape(K, -1).T
-        return w
+        """Scaled decision vector from unscaled trajectories (the sensor states at the nodes are implied)."""
+        x_scale, u_scale = self._scales(P)
+        k, K = self.kernels, self.intervals
+        w = np.zeros(self.nw + k.nx)
+        w[self.maps.boundary] = np.asarray(xs) / x_scale
+        z = np.concatenate([(xc[:, :, : k.ns] / x_scale[: k.ns]).reshape(K, -1), (u / u_scale).reshape(K, -1)], axis=1)
+        w[self.maps.z] = z
+        return w[: self.nw]
 
     def costates(self, result: NLPResult, P: np.ndarray) -> np.ndarray:
         """Costate estimates λ at t0 and at every collocation node, shape (1 + K d, nx), from the multipliers.
 
-        The collocation residual of node r is ``h (x̃' − f̃)`` with x̃ = x / D_x; weighted by its multiplier
-        ν_r it mirrors ``−∫ λ'(ẋ − f) dt ≈ −Σ h W_r λ_r' D_x (x̃' − f̃)``, so
-        ``λ(t_r) = −cost_scale ν_r / (ε W_r D_x)`` for J_ε (the NLP objective is ε J_ε / cost_scale).
-        At t0 the multiplier ν_0 of ``x̃_0 = x0 / D_x`` is the sensitivity of the optimum to x0 (envelope
-        theorem): ``λ(t0) = ∂J_ε/∂x0 = −cost_scale ν_0 / (ε D_x)``.
+        The collocation residual of node r is ``h (x̃' − f̃)``; weighted by its multiplier ν_r it mirrors
+        ``−∫ λ'(ẋ − f) dt ≈ −Σ h W_r λ_r' D_x (x̃' − f̃)``, so ``λ(t_r) = −cost_scale ν_r / (ε W_r D_x)`` for J_ε
+        (eq. direct.6). The sensors' collocation equations were solved exactly (eq. direct.11), so their
+        multipliers are recovered from stationarity in the eliminated node states (eq. direct.12), and
+        ``λ(t0) = ∂J_ε/∂x0`` from stationarity in x̃_0 (envelope theorem).
         """
         b = self.layout.unpack(np.asarray(P, float))
-        x_scale = np.asarray(self.model.scales(P)[0]).ravel()
-        nx, d, K = self.structure.nx, self.colloc.degree, self.intervals
+        x_scale, _ = self._scales(P)
+        k, c, K, d = self.kernels, self.colloc, self.intervals, self.colloc.degree
+        ns, ny = k.ns, k.ny
         scale = float(b["cost_scale"][0]) / float(b["eps"][0])
-        nu_coll = result.lam_g[: nx * d * K].reshape(K * d, nx)
-        start = nx * d * K + nx * K
-        nu_init = result.lam_g[start : start + nx]
-        lam_nodes = -scale * nu_coll / (np.tile(self.colloc.W, K)[:, None] * x_scale[None, :])
-        lam_t0 = -scale * nu_init / x_scale
-        return np.vstack([lam_t0, lam_nodes])
+        h = (float(b["tf"][0]) - float(b["t0"][0])) / K
+        lam = result.lam_g[: K * k.nr].reshape(K, k.nr)
+        mu = lam[:, : k.n_gap]  # multipliers of next_k − end_k (K, nn)
+        lam_path = lam[:, k.n_gap : k.n_gap + k.n_path]
+        nu_sigma = lam_path.reshape(K, d, ns)
+        a, Ph = self._local(result.w, P)
+        G = np.asarray(self._pv_gradient(a, Ph, lam_path.T)).reshape(ny, K, d).transpose(1, 2, 0)  # (K, d, ny)
+        # eq. direct.12: D̂ ν − h ν F̃ = e μ_y − G per interval, F̃ nilpotent: ν = D̂⁻¹B + h D̂⁻² B F̃
+        _, _, e = condensing_matrices(c)
+        B = e[None, :, None] * mu[:, None, -ny:] - G
+        Dinv = np.linalg.inv(c.D[1:, :])
+        F = np.zeros((ny, ny))
+        F[: ny // 2, ny // 2 :] = np.eye(ny // 2)
+        F *= x_scale[ns:][None, :] / x_scale[ns:][:, None]
+        nu_y = np.einsum("rj,kjy->kry", Dinv, B) + h * np.einsum("rj,kjy->kry", Dinv @ Dinv, B) @ F
+        nu = np.concatenate([nu_sigma, nu_y], axis=2)  # (K, d, nx)
+        lam_nodes = -scale * nu.reshape(K * d, -1) / (np.tile(c.W, K)[:, None] * x_scale[None, :])
+        mu0 = np.zeros(k.nx)
+        mu0[-k.nn :] = mu[0]
+        nu_init = -(c.D[0, :] @ nu[0]) + c.E[0] * mu0
+        return np.vstack([-scale * nu_init / x_scale, lam_nodes])
 
     def constraint_labels(self, sensor_names: list[str], t0: float, tf: float) -> list[tuple[str, float]]:
         """(description, time) of every NLP constraint, in problem terms."""
-        s, d, K = self.structure, self.colloc.degree, self.intervals
+        s, k, d, K = self.structure, self.kernels, self.colloc.degree, self.intervals
         state = s.state.labels(sensor_names)
         starts, nodes = self.times(t0, tf)
-        labels: list[tuple[str, float]] = []
-        for k in range(K):
-            for r in range(d):
-                labels += [(f"dynamics of {name} (collocation)", float(nodes[k, r])) for name in state]
-        for k in range(K):
-            labels += [(f"continuity of {name}", float(starts[k + 1])) for name in state]
-        labels += [(f"initial value of {name}", float(starts[0])) for name in state]
-        labels += [(f"{kind} of sensor {sensor_names[i]}", float(starts[-1])) for kind, i in self._terminal_labels]
         bounded = [i for i in range(s.N) if s.bounded_control[i]]
-        for k in range(K):
+        labels: list[tuple[str, float]] = []
+        for j in range(K):
+            labels += [(f"continuity of {name}", float(starts[j + 1])) for name in state[-k.nn :]]
             for r in range(d):
-                labels += [(f"|u| ≤ u_max of sensor {sensor_names[i]}", float(nodes[k, r])) for i in bounded]
+                labels += [(f"dynamics of {name} (collocation)", float(nodes[j, r])) for name in state[: k.ns]]
+            for r in range(d):
+                labels += [(f"|u| ≤ u_max of sensor {sensor_names[i]}", float(nodes[j, r])) for i in bounded]
+        labels += [(f"{kind} of sensor {sensor_names[i]}", float(starts[-1])) for kind, i in k.terminal_labels]
         return labels
 
 
@@ -412,10 +452,18 @@ def _cached_transcription(
     tolerance: float,
     max_iterations: int,
     time_limit: float | None = None,
+    codegen: str = "auto",
 ) -> DirectCollocation:
     extra = {} if time_limit is None else {"max_wall_time": time_limit}
     return DirectCollocation(
-        structure, scheme, degree, intervals, ipopt_options=extra, tolerance=tolerance, max_iterations=max_iterations
+        structure,
+        scheme,
+        degree,
+        intervals,
+        ipopt_options=extra,
+        tolerance=tolerance,
+        max_iterations=max_iterations,
+        codegen=codegen,
     )
 
 
@@ -424,7 +472,14 @@ def transcription_for(problem: Problem) -> DirectCollocation:
     opts = problem.solver
     c = opts.collocation
     return _cached_transcription(
-        Structure.of(problem), c.scheme, c.degree, c.intervals, opts.tolerance, opts.max_iterations, opts.time_limit
+        Structure.of(problem),
+        c.scheme,
+        c.degree,
+        c.intervals,
+        opts.tolerance,
+        opts.max_iterations,
+        opts.time_limit,
+        opts.codegen,
     )
 
 

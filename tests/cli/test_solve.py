@@ -47,8 +47,13 @@ def test_solve_writes_the_contract(tmp_path, capsys):
         assert key in summary
     assert summary["status"] == "solved"
     assert summary["cost"] == pytest.approx(summary["terminal_cost"] + summary["running_cost"], rel=1e-14)
-    assert len(summary["homotopy"]) == 20 and summary["homotopy"][-1]["eps"] == 1.0
-    assert set(summary["homotopy"][0]) == {"eps", "cost", "iterations", "status", "time_s"}
+    # the default strategy (auto, docs/theory/direct.md §5.6) records the steps of every start it solved,
+    # each labelled with its start; the kept start reached ε = 1 with the reported cost
+    kept = summary["strategy"]["kept"]
+    assert kept in {s["start"] for s in summary["strategy"]["starts"]}
+    kept_steps = [h for h in summary["homotopy"] if h["start"] == kept]
+    assert kept_steps[-1]["eps"] == 1.0 and kept_steps[-1]["cost"] == pytest.approx(summary["cost"], rel=1e-12)
+    assert set(summary["homotopy"][0]) == {"eps", "cost", "iterations", "status", "time_s", "start"}
     assert summary["solver"]["collocation"]["intervals"] == 40
     assert summary["improvement_percent"] == pytest.approx(
         100 * (summary["baseline"]["cost"] - summary["cost"]) / summary["baseline"]["cost"]

@@ -62,7 +62,10 @@ def test_adaptive_gives_up_below_min_step():
 
 @pytest.mark.slow
 def test_failure_mid_homotopy_keeps_last_solved_step(monkeypatch):
-    problem = Problem.from_dict(hussein2008(collocation={"intervals": 40}, homotopy={"step": 0.25}))
+    # the continuation alone (strategy homotopy, no budget: no cold solve to fall back on), docs/theory/direct.md §5.3
+    problem = Problem.from_dict(
+        hussein2008(collocation={"intervals": 40}, homotopy={"step": 0.25, "budget": None}, strategy="homotopy")
+    )
     tr = transcription_for(problem)
     real_solve = type(tr).solve
     eps_offset = tr.layout.offsets["eps"][0]

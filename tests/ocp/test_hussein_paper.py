@@ -29,7 +29,8 @@ PAPER_BVP = {"solver": "scipy", "scipy_tolerance": 1e-3, "max_nodes": 1000}
 
 @pytest.fixture(scope="module")
 def direct():
-    solution = solve_direct(Problem.from_dict(hussein2008()))
+    # the paper's continuation itself: strategy homotopy without an iteration budget (docs/theory/direct.md §5.6)
+    solution = solve_direct(Problem.from_dict(hussein2008(strategy="homotopy", homotopy={"budget": None})))
     assert solution.success
     return solution
 

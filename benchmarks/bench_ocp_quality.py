@@ -1,0 +1,127 @@
+"""Optimum quality and iteration counts of the direct method's solve strategies (issue targets, PASS/MISS).
+
+On a set of seeded synthetic problems (``reference_transcription.synthetic_problem``: n = 1–4 states,
+N = 1–4 sensors, random geometry, drift and noise; K intervals) this solves:
+
+* the **default** (``solve_direct(problem)``: strategy ``auto``, docs/theory/direct.md §5.6);
+* the candidates it must not lose to, each on its own: the **cold** ε = 1 solve from coasting, the
+  **homotopy** (20 fixed steps δ = 0.05, warm-started, *no* iteration budget) and a **4-start multistart**
+  (random feasible guesses, :func:`mobisense.ocp.direct.random_guess` seeds 1–4), all from one
+  ``thorough`` solve with the budget switched off;
+* the independent **reference** transcription's cold solve (iterations only).
+
+Targets: the default's cost is never worse than the best of {cold, homotopy, multistart} by more than 1e-6
+relative; cold iterations no worse than the reference's (median ratio ≤ 1); the default's continuation
+never costs more than 1.5 × its cold solve (plus the one iteration in which the budget callback fires).
+
+Usage: ``python benchmarks/bench_ocp_quality.py [--K 50] [--problems 24]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import time
+
+from reference_transcription import ReferenceOCP, synthetic_problem
+
+from mobisense import Problem
+from mobisense.ocp.direct import solve_direct
+
+#: (n, N, seed): every (n, N) of 1–4 × 1–4 with seed 0, then eight with seed 1
+PROBLEMS = [(n, N, 0) for n in range(1, 5) for N in range(1, 5)] + [
+    (1, 1, 1),
+    (1, 3, 1),
+    (2, 2, 1),
+    (2, 4, 1),
+    (3, 1, 1),
+    (3, 3, 1),
+    (4, 2, 1),
+    (4, 4, 1),
+]
+
+
+def verdict(ok: bool) -> str:
+    """PASS or MISS."""
+    return "PASS" if ok else "MISS"
+
+
+def starts(solution) -> dict[str, dict]:  # noqa: ANN001
+    """label -> summary of every start of a solve (cost None when it did not reach ε = 1)."""
+    return {s["start"]: s for s in solution.stats["strategy"]["starts"]}
+
+
+def main() -> int:
+    """Print the table and the three verdicts."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--K", type=int, default=50)
+    parser.add_argument("--problems", type=int, default=len(PROBLEMS))
+    args = parser.parse_args()
+    print(f"load average before: {os.getloadavg()[0]:.2f} (2 cores); K = {args.K}")
+    print(
+        "| n, N, seed | best J | default J (excess) | kept | default it | cold (excess, it) | "
+        "homotopy (excess, it) | multistart-4 (excess) | reference cold it | cold ÷ reference it | "
+        "default's continuation ÷ cold it |"
+    )
+    print("| --- | " + " | ".join("---" for _ in range(10)) + " |")
+    excess_default, ratios_ref, ratios_hom, elapsed = [], [], [], []
+    for n, N, seed in PROBLEMS[: args.problems]:
+        data = synthetic_problem(n, N, seed, intervals=args.K)
+        problem = Problem.from_dict(data)
+        t0 = time.perf_counter()
+        default = solve_direct(problem)
+        elapsed.append(time.perf_counter() - t0)
+        everything = solve_direct(
+            problem.with_solver(strategy="thorough", homotopy={"mode": "fixed", "step": 0.05, "budget": None})
+        )
+        ref = ReferenceOCP(data, intervals=args.K).solve()
+        runs = starts(everything)
+        cold, hom = runs["cold"], runs["homotopy"]
+        multi = [s["cost"] for label, s in runs.items() if label.startswith("random start") and s["cost"] is not None]
+        candidates = [c for c in (cold["cost"], hom["cost"], min(multi, default=None)) if c is not None]
+        best = min(candidates)
+
+        def excess(J: float | None, best: float = best) -> str:
+            return "fail" if J is None else f"{(J - best) / abs(best):.1e}"
+
+        d = starts(default)
+        J = default.cost if default.success else float("inf")
+        excess_default.append((J - best) / abs(best))
+        if ref.success and cold["cost"] is not None:
+            ratios_ref.append(cold["iterations"] / ref.iterations)
+        hom_ratio = d["homotopy"]["iterations"] / d["cold"]["iterations"] if "homotopy" in d else 0.0
+        ratios_hom.append((hom_ratio, d["cold"]["iterations"]))
+        print(
+            f"| {n}, {N}, {seed} | {best:.8g} | {J:.8g} ({excess(J)}) | {default.stats['strategy']['kept']} | "
+            f"{sum(s['iterations'] for s in d.values())} | {excess(cold['cost'])}, {cold['iterations']} | "
+            f"{excess(hom['cost'])}, {hom['iterations']} | {excess(min(multi, default=None))} | "
+            f"{ref.iterations if ref.success else 'fail'} | "
+            f"{cold['iterations'] / ref.iterations:.2f} | {hom_ratio:.2f} |"
+        )
+        sys.stdout.flush()
+    worst = max(excess_default)
+    within = sum(e <= 1e-6 for e in excess_default)
+    print(
+        f"\noptimum quality: default within 1e-6 of the best of {{cold, homotopy, 4-start}} on {within}/"
+        f"{len(excess_default)} problems, worst excess {worst:.1e}: {verdict(worst <= 1e-6)}"
+    )
+    median_ref = statistics.median(ratios_ref)
+    print(
+        f"cold ε = 1 iterations ÷ reference's: median {median_ref:.2f} (range {min(ratios_ref):.2f}–"
+        f"{max(ratios_ref):.2f}, ≤ 1 on {sum(r <= 1 for r in ratios_ref)}/{len(ratios_ref)}): "
+        f"{verdict(median_ref <= 1.0)} (median), {verdict(max(ratios_ref) <= 1.0)} (every problem)"
+    )
+    over = [r for r, c in ratios_hom if r > 1.5 + 1.0 / c]
+    print(
+        f"default's continuation ÷ its cold solve (iterations): max {max(r for r, _ in ratios_hom):.2f}, "
+        f"over 1.5 (+1 iteration) on {len(over)}/{len(ratios_hom)}: {verdict(not over)}"
+    )
+    print(f"default solve wall time: median {statistics.median(elapsed):.2f} s, max {max(elapsed):.2f} s")
+    print(f"load average after: {os.getloadavg()[0]:.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,269 @@
+"""Solve strategies of the direct method: which starts are solved, which optimum is kept (docs/theory/direct.md §5.6).
+
+The NLP has many local optima: from the coasting guess, from the end of the ε-continuation and from random
+starts Ipopt lands on different ones, up to 10 % apart (48 % for one homotopy), and none of the starts is reliably
+the best (benchmarks/bench_ocp_quality.py, benchmarks/RESULTS.md). ``solver.strategy`` chooses:
+
+``auto`` (default)
+    a cold ε = 1 solve, then the continuation of ``solver.homotopy`` within ``budget`` × the cold solve's
+    iterations; when the two agree (relative ``agreement``) the lower is kept, otherwise — or when the
+    continuation did not finish — ``solver.starts`` random starts are solved too and the best is kept.
+``thorough``
+    the cold solve, the continuation and the random starts, always; the best is kept.
+``homotopy``
+    the continuation (Hussein, 2008); with a ``budget`` a cold solve first, kept instead when the
+    continuation would cost more than ``budget`` × its iterations or fails (detect and fall back).
+``cold``
+    the cold solve alone.
+
+Every start is a :class:`Continuation`; its steps are reported through ``progress`` as they finish, each
+labelled with its start.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..homotopy import run_continuation
+from ..problem import Problem
+from ..registries import STRATEGIES
+from ..solution import HomotopyStep
+from .transcription import DirectCollocation, NLPResult
+
+__all__ = [
+    "Continuation",
+    "SolveContext",
+    "run_strategy",
+    "auto_strategy",
+    "thorough_strategy",
+    "homotopy_strategy",
+    "cold_strategy",
+]
+
+
+@dataclass
+class SolveContext:
+    """What every start of one solve shares: the problem, its NLP, the coasting guess, the step record."""
+
+    problem: Problem
+    tr: DirectCollocation
+    values: dict[str, Any]
+    w0: np.ndarray
+    progress: Callable[[HomotopyStep], None] | None = None
+    steps: list[HomotopyStep] = field(default_factory=list)
+
+    def parameters(self, eps: float) -> np.ndarray:
+        """The NLP parameter vector at ``eps``."""
+        return self.tr.layout.pack({**self.values, "eps": eps})
+
+    def cost(self, w: np.ndarray) -> float:
+        """J at ε = 1 of a decision vector."""
+        phi, running, _ = (float(v) for v in self.tr.cost_terms(w, self.parameters(1.0)))
+        return phi + running
+
+    def start(
+        self,
+        label: str,
+        w: np.ndarray | None = None,
+        lam_w: np.ndarray | None = None,
+        lam_g: np.ndarray | None = None,
+        budget: int | None = None,
+    ) -> Continuation:
+        """A new start from ``w`` (default: the coasting guess), optionally primal–dual, within ``budget``."""
+        return Continuation(self, label, self.w0 if w is None else w, lam_w, lam_g, budget=budget)
+
+
+@dataclass
+class Continuation:
+    """One start: the accepted primal–dual point, its steps, its accepted ε path, the iterations it spent.
+
+    ``budget`` (Ipopt iterations over all its steps, enforced inside Ipopt) stops it: once spent, every
+    further ``attempt`` fails and ``exhausted`` is set.
+    """
+
+    ctx: SolveContext
+    label: str
+    w: np.ndarray
+    lam_w: np.ndarray | None = None
+    lam_g: np.ndarray | None = None
+    budget: int | None = None
+    result: NLPResult | None = None  # the last accepted result
+    eps: float = 0.0  # the last accepted ε
+    failed: NLPResult | None = None  # the last failed result
+    used: int = 0
+    exhausted: bool = False
+    steps: list[HomotopyStep] = field(default_factory=list)
+    path: list[tuple[float, np.ndarray]] = field(default_factory=list)
+
+    @property
+    def tr(self) -> DirectCollocation:
+        """The transcription."""
+        return self.ctx.tr
+
+    def parameters(self, eps: float) -> np.ndarray:
+        """The NLP parameter vector at ``eps``."""
+        return self.ctx.parameters(eps)
+
+    def attempt(self, eps: float) -> bool:
+        """Solve at ``eps`` from the accepted point; accept it if Ipopt converged."""
+        left = None if self.budget is None else self.budget - self.used
+        if self.exhausted or (left is not None and left <= 0):
+            self.exhausted = True
+            return False
+        P = self.parameters(eps)
+        result = self.tr.solve(P, self.w, self.lam_w, self.lam_g, max_iterations=left)
+        self.used += result.iterations
+        if left is not None and result.status == "User_Requested_Stop":
+            self.exhausted = True
+        phi, running, _ = (float(v) for v in self.tr.cost_terms(result.w, P))
+        step = HomotopyStep(
+            eps, phi + running / eps, result.iterations, result.status, result.time_s, result.success, self.label
+        )
+        self.steps.append(step)
+        self.ctx.steps.append(step)
+        if self.ctx.progress is not None:
+            self.ctx.progress(step)
+        if result.success:
+            self.w, self.lam_w, self.lam_g, self.result, self.eps = result.w, result.lam_w, result.lam_g, result, eps
+            self.path.append((eps, result.w))
+        else:
+            self.failed = result
+        return result.success
+
+    def restart(self, w: np.ndarray, lam_w: np.ndarray | None = None, lam_g: np.ndarray | None = None) -> None:
+        """Continue from another primal (and dual) point."""
+        self.w, self.lam_w, self.lam_g = w, lam_w, lam_g
+
+    @property
+    def solved(self) -> bool:
+        """True when this start converged at ε = 1."""
+        return self.eps == 1.0 and self.result is not None
+
+    def summary(self) -> dict[str, Any]:
+        """Start label, J at ε = 1 (None if not reached), iterations, ε reached, last status."""
+        last = self.steps[-1].status if self.steps else "not run"
+        return {
+            "start": self.label,
+            "cost": self.ctx.cost(self.w) if self.solved else None,
+            "iterations": self.used,
+            "eps_reached": self.eps,
+            "status": "budget spent" if self.exhausted else last,
+        }
+
+
+def _cold(ctx: SolveContext) -> Continuation:
+    run = ctx.start("cold")
+    run.attempt(1.0)
+    return run
+
+
+def _homotopy(ctx: SolveContext, budget: int | None) -> Continuation:
+    run = ctx.start("homotopy", budget=budget)
+    run_continuation(run.attempt, ctx.problem.solver.homotopy)
+    return run
+
+
+def _random_starts(ctx: SolveContext) -> list[Continuation]:
+    from .guesses import random_guess
+
+    runs = []
+    for seed in range(1, ctx.problem.solver.starts + 1):
+        run = ctx.start(f"random start {seed}", random_guess(ctx.problem, seed, tr=ctx.tr))
+        run.attempt(1.0)
+        runs.append(run)
+    return runs
+
+
+def _best(runs: list[Continuation], rtol: float) -> Continuation | None:
+    """The earliest converged start whose J is within ``rtol`` of the lowest (one optimum, found first), or None."""
+    costs = [(r.ctx.cost(r.w), r) for r in runs if r.solved]
+    if not costs:
+        return None
+    lowest = min(c for c, _ in costs)
+    return next(r for c, r in costs if c <= lowest + rtol * abs(lowest))
+
+
+def _budget(cold: Continuation, factor: float | None) -> int | None:
+    """Iterations the continuation may take: ``factor`` × the cold solve's, if the cold solve converged."""
+    return None if factor is None or not cold.solved else int(factor * cold.used)
+
+
+def _agree(a: Continuation, b: Continuation, rtol: float) -> bool:
+    if not (a.solved and b.solved):
+        return False
+    ja, jb = a.ctx.cost(a.w), b.ctx.cost(b.w)
+    return abs(ja - jb) <= rtol * max(abs(ja), abs(jb))
+
+
+def _fallback(runs: list[Continuation]) -> Continuation:
+    """What to report when no start converged: the continuation (it keeps the last ε solved), else the first."""
+    return next((r for r in runs if r.label == "homotopy"), runs[0])
+
+
+def cold_strategy(ctx: SolveContext) -> tuple[list[Continuation], Continuation]:
+    """The cold ε = 1 solve alone."""
+    runs = [_cold(ctx)]
+    return runs, runs[0]
+
+
+def homotopy_strategy(ctx: SolveContext) -> tuple[list[Continuation], Continuation]:
+    """The continuation; with ``solver.homotopy.budget``, a cold solve first to bound it and to fall back on."""
+    options = ctx.problem.solver.homotopy
+    if options.mode == "none":
+        return cold_strategy(ctx)
+    if options.budget is None:
+        runs = [_homotopy(ctx, None)]
+        return runs, runs[0]
+    cold = _cold(ctx)
+    homotopy = _homotopy(ctx, _budget(cold, options.budget))
+    runs = [cold, homotopy]
+    return runs, homotopy if homotopy.solved else (_best(runs, ctx.problem.solver.agreement) or homotopy)
+
+
+def auto_strategy(ctx: SolveContext) -> tuple[list[Continuation], Continuation]:
+    """Cold solve and budgeted continuation; random starts as well unless the two agree."""
+    options = ctx.problem.solver
+    cold = _cold(ctx)
+    runs = [cold]
+    if options.homotopy.mode != "none":
+        runs.append(_homotopy(ctx, _budget(cold, options.homotopy.budget)))
+    if not (len(runs) == 2 and _agree(*runs, options.agreement)):
+        runs += _random_starts(ctx)
+    return runs, _best(runs, ctx.problem.solver.agreement) or _fallback(runs)
+
+
+def thorough_strategy(ctx: SolveContext) -> tuple[list[Continuation], Continuation]:
+    """Cold solve, budgeted continuation and the random starts, always."""
+    runs = [_cold(ctx)]
+    if ctx.problem.solver.homotopy.mode != "none":
+        runs.append(_homotopy(ctx, _budget(runs[0], ctx.problem.solver.homotopy.budget)))
+    runs += _random_starts(ctx)
+    return runs, _best(runs, ctx.problem.solver.agreement) or _fallback(runs)
+
+
+def run_strategy(ctx: SolveContext) -> tuple[Continuation, dict[str, Any]]:
+    """Run ``solver.strategy`` (see module docstring); the start to report and what every start found.
+
+    Returns
+    -------
+    kept : Continuation
+        The start whose solution is reported: the converged start of lowest cost (``homotopy``: the
+        continuation when it converged); when none converged, the continuation (it keeps the last ε
+        solved), else the cold solve.
+    record : dict
+        ``strategy``, ``kept`` (label), ``homotopy_budget`` (iterations or None), ``starts``
+        (:meth:`Continuation.summary` of each).
+    """
+    name = ctx.problem.solver.strategy
+    runs, kept = STRATEGIES[name](ctx)
+    record = {
+        "strategy": name,
+        "kept": kept.label,
+        "homotopy_budget": next((r.budget for r in runs if r.label == "homotopy"), None),
+        "starts": [r.summary() for r in runs],
+    }
+    return kept, record
