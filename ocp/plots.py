@@ -8,6 +8,7 @@ import casadi as ca
 import numpy as np
 
 from ..core.files import write_figure
+from .path_constraints import draw_constraints
 from .registries import NOISE_MODELS
 from .solution import Solution
 
@@ -54,6 +55,7 @@ def plot_paths(solution: Solution):  # noqa: ANN201  (matplotlib Figure)
         ax.plot(*solution.p[0, i], "o", color=line.get_color(), ms=7)
         ax.plot(*solution.p[-1, i], "s", color=line.get_color(), ms=7)
     ax.plot(*locs.T, "r*", ms=14, label="process locations")
+    draw_constraints(ax, problem.constraints)
     ax.set_xlabel("x (L)")
     ax.set_ylabel("y (L)")
     ax.set_aspect("equal")
