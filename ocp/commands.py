@@ -42,6 +42,12 @@ class SolveCommand:
             help="override solver.strategy (direct method: which starts to solve, docs/theory/direct.md §5.6)",
         )
         parser.add_argument("--no-plot", action="store_true", help="skip the figures")
+        parser.add_argument(
+            "--sensitivities",
+            action="store_true",
+            help="direct method: add dJ*/d(value) of every number of the file to summary.json "
+            "(envelope theorem, docs/theory/path_constraints.md §4)",
+        )
         parser.add_argument("--quiet", action="store_true", help="no progress display or table")
         parser.add_argument(
             "--multistart",
@@ -65,6 +71,8 @@ class SolveCommand:
         data = apply_overrides(read_yaml(args.problem), args)
         problem = Problem.from_dict(data, source=str(args.problem))  # ConfigError -> exit 2, nothing written
         out = args.out if args.out is not None else default_output_folder(args.problem)
+        if args.sensitivities and problem.solver.method != "direct":
+            raise ConfigError(f"{args.problem}: --sensitivities: expected solver.method 'direct'")
         reporter = SolveReporter(problem, quiet=args.quiet)
         if args.multistart is not None:
             if args.multistart < 1 or problem.solver.method != "direct":
@@ -74,6 +82,12 @@ class SolveCommand:
             solution = solve_multistart(problem, args.multistart, args.scheduler, args.workers)
         else:
             solution = reporter.run(problem.solver.method)
+        if args.sensitivities:
+            if solution.success and solution.nlp is not None:
+                from .direct.sensitivities import solution_sensitivities
+                from .direct.transcription import transcription_for
+
+                solution.stats["sensitivities"] = solution_sensitivities(transcription_for(problem), solution)
         solution.save(out)
         if not args.no_plot:
             from .plots import save_figures
