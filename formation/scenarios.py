@@ -2,6 +2,7 @@
 
 - ``field_replay`` (a ``field:`` key): :func:`~mobisense.formation.replay.runs.run_field_replay`;
 - ``plan_replay`` (a ``solution:`` key): :func:`~mobisense.formation.replay.runs.run_plan_replay`;
+- ``replan`` (``kind: replan``): :func:`~mobisense.formation.replay.replan.run_replan`;
 - ``leader_follower`` (``mobisense simulate leader-follower``):
   :func:`~mobisense.formation.leader_follower.runs.run_leader_follower`;
 - ``distributed`` (``mobisense simulate distributed``):
@@ -31,6 +32,7 @@ SCENARIO_KINDS: dict[str, str] = {
     "plan_replay": "mobisense.formation.replay.plan:OcpReplayScenario",
     "leader_follower": "mobisense.formation.leader_follower.scenario:LeaderFollowerScenario",
     "distributed": "mobisense.formation.distributed.simulation:DistributedScenario",
+    "replan": "mobisense.formation.replay.replan:ReplanScenario",
 }
 
 
@@ -62,6 +64,10 @@ class Scenario:
             from .replay.runs import run_plan_replay
 
             return run_plan_replay(self.config, self.source, seed)
+        if self.kind == "replan":
+            from .replay.replan import run_replan
+
+            return run_replan(self.config, self.source, seed)
         if self.kind == "leader_follower":
             from .leader_follower.runs import run_leader_follower
 
@@ -82,6 +88,8 @@ def replay_kind(data: Any, source: Path) -> str:
     """``field_replay`` or ``plan_replay`` from the keys of a replay file; ``ConfigError`` if neither."""
     from ..core.config import ConfigError
 
+    if isinstance(data, dict) and data.get("kind") == "replan":
+        return "replan"
     if isinstance(data, dict) and "field" in data:
         return "field_replay"
     if isinstance(data, dict) and "solution" in data:
