@@ -4,14 +4,14 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast lint bench clean
+.PHONY: demo test test-fast lint bench docs notebooks clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
 $(STAMP): pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet -e ".[test]"
+	$(BIN)/python -m pip install --quiet -e ".[sweep,test,docs]"
 	$(BIN)/python -m ipykernel install --sys-prefix --name python3 >/dev/null
 	touch $(STAMP)
 
@@ -19,13 +19,20 @@ demo: $(STAMP)  ## solve the default problem (problems/hussein2008.yaml) into ou
 	$(BIN)/mobisense solve problems/hussein2008.yaml --out out/hussein2008
 	@echo "the command is installed in $(BIN)/: run '$(BIN)/mobisense --help' (or 'source $(BIN)/activate')"
 
-test: $(STAMP)  ## ruff + the whole test suite (tests and notebooks): what CI runs
+test: $(STAMP)  ## ruff + the whole test suite (tests and notebooks) + the documentation site: what CI runs
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest
+	$(MAKE) docs
 
 test-fast: $(STAMP)  ## the edit-test loop: everything but notebooks and tests marked slow
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -m "not slow and not notebook" -q
+
+docs: $(STAMP)  ## the documentation site into site/ (mkdocs build --strict: any warning is an error)
+	NO_MKDOCS_2_WARNING=1 MPLBACKEND=Agg $(BIN)/mkdocs build --strict --quiet
+
+notebooks: $(STAMP)  ## execute notebooks/*.ipynb in place and store their outputs (figures) in them
+	$(BIN)/python docs/tools/execute_notebooks.py notebooks/*.ipynb
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
@@ -34,4 +41,4 @@ bench: $(STAMP)  ## performance targets with PASS/MISS, ratios measured in one r
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
 
 clean:
-	rm -rf out .pytest_cache build *.egg-info
+	rm -rf out .pytest_cache build site *.egg-info

@@ -1,4 +1,4 @@
-"""The ``mobisense`` command line: ``mobisense solve|validate|sweep|steady-state|replay|simulate …``.
+"""The ``mobisense`` command line: ``mobisense solve|sweep|steady-state|replay|simulate|validate|schema|examples``.
 
 :data:`COMMANDS` is the one registry of sub-commands. Each names a class in its package's ``commands``
 module whose docstring's first line is its help text, with ``add_arguments(parser)`` and
@@ -22,11 +22,13 @@ __all__ = ["COMMANDS", "build_parser", "main"]
 #: sub-command name -> "module:class" implementing it
 COMMANDS: dict[str, str] = {
     "solve": "mobisense.ocp.commands:SolveCommand",
-    "validate": "mobisense.ocp.commands:ValidateCommand",
     "sweep": "mobisense.ocp.commands:SweepCommand",
     "steady-state": "mobisense.estimation.commands:SteadyStateCommand",
     "replay": "mobisense.formation.commands:ReplayCommand",
     "simulate": "mobisense.formation.commands:SimulateCommand",
+    "validate": "mobisense.core.commands:ValidateCommand",
+    "schema": "mobisense.core.commands:SchemaCommand",
+    "examples": "mobisense.core.commands:ExamplesCommand",
 }
 
 
@@ -58,9 +60,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exit_:  # --help, --version, usage errors: argparse has printed what to say
         return exit_.code if isinstance(exit_.code, int) else 2
     from .core.config import ConfigError  # after parsing: ``--help`` needs neither pydantic nor numpy
+    from .core.netcdf import recorded_command
 
     try:
-        return int(args.run(args) or 0)
+        with recorded_command(argv):  # the "history" of every netCDF file written
+            return int(args.run(args) or 0)
     except ConfigError as err:
         print(f"mobisense: error: {err}", file=sys.stderr)
         return 2

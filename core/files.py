@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["atomic_path", "write_json", "write_netcdf", "write_netcdf_variables", "write_figure", "to_jsonable"]
+__all__ = ["atomic_path", "write_json", "write_netcdf", "write_figure", "to_jsonable"]
 
 
 @contextmanager
@@ -71,58 +71,16 @@ def write_json(path: str | Path, data: dict[str, Any]) -> None:
 
 
 def write_netcdf(path: str | Path, dataset: Any) -> None:
-    """Write an ``xarray.Dataset`` with the h5netcdf engine, atomically."""
-    with atomic_path(path) as tmp:
-        dataset.to_netcdf(tmp, mode="w", engine="h5netcdf")
+    """Write an ``xarray.Dataset`` as a CF-1.10 netCDF-4 file (h5netcdf), atomically.
 
-
-def write_netcdf_variables(
-    path: str | Path, data: dict[str, tuple], coords: dict[str, Any], attrs: dict[str, Any] | None = None
-) -> None:
-    """Write what ``xarray.Dataset(data, coords=coords, attrs=attrs)`` would hold, with h5netcdf alone, atomically.
-
-    ``xarray.Dataset.to_netcdf`` imports pandas and, through its duck-array checks, dask and distributed
-    (1–3 s in a fresh process); this writes the same netCDF4 file (``xarray.open_dataset(path,
-    engine="h5netcdf")`` reads back an identical dataset) without them.
-
-    Parameters
-    ----------
-    path : str or Path
-    data : dict
-        name -> ``(dims, array)`` or ``(dims, array, attrs)``, as for ``xarray.Dataset``.
-    coords : dict
-        dimension name -> 1-D values (numbers or strings).
-    attrs : dict, optional
-        Global attributes (str, int, float).
+    The global attributes, encoding and string labels are those of :func:`mobisense.core.netcdf.prepare`;
+    :func:`mobisense.core.netcdf.open_dataset` reads the file back as the dataset it was.
     """
-    import h5netcdf
-    import h5py
+    from .netcdf import prepare
 
-    def as_array(values: Any) -> np.ndarray:
-        arr = np.asarray(values)
-        if arr.dtype.kind in "US" or arr.dtype == object:
-            return np.asarray([str(v) for v in np.ravel(arr)], dtype=object).reshape(arr.shape)
-        return arr
-
-    sizes: dict[str, int] = {name: len(v) for name, v in coords.items()}
-    for dims, values, *_ in data.values():
-        for dim, n in zip(dims, np.shape(values), strict=True):
-            sizes.setdefault(dim, n)
-    with atomic_path(path) as tmp, h5netcdf.File(str(tmp), "w") as f:
-        for dim, n in sizes.items():
-            f.dimensions[dim] = n
-        for name, values in coords.items():
-            arr = as_array(values)
-            if arr.dtype == object:
-                f.create_variable(name, (name,), dtype=h5py.string_dtype())[...] = arr
-            else:
-                f.create_variable(name, (name,), data=arr)
-        for name, (dims, values, *rest) in data.items():
-            variable = f.create_variable(name, tuple(dims), data=as_array(values))
-            for key, value in (rest[0] if rest else {}).items():
-                variable.attrs[key] = value
-        for key, value in (attrs or {}).items():
-            f.attrs[key] = value
+    prepared, encoding = prepare(dataset)
+    with atomic_path(path) as tmp:
+        prepared.to_netcdf(tmp, mode="w", engine="h5netcdf", encoding=encoding)
 
 
 def write_figure(path: str | Path, draw: Callable[[], Any]) -> None:

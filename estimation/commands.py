@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-__all__ = ["SteadyStateCommand"]
+__all__ = ["SteadyStateCommand", "check_formation"]
 
 
 class SteadyStateCommand:
@@ -20,7 +20,7 @@ class SteadyStateCommand:
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser) -> None:
         """Add the ``steady-state`` arguments."""
-        parser.add_argument("formation", type=Path, help="formation YAML file")
+        parser.add_argument("formation", type=Path, help="formation YAML file, or a shipped example's name")
         parser.add_argument("--out", type=Path, default=None, help="output folder (default out/<file name>)")
         parser.add_argument("--no-plot", action="store_true", help="skip the contour plot")
 
@@ -28,9 +28,11 @@ class SteadyStateCommand:
     def run(args: argparse.Namespace) -> int:
         """Validate, design, write ``summary.json``, ``trace_grid.nc`` and ``trace_contour.png``."""
         from ..core.config import load_config
+        from ..core.examples import resolve_input
         from ..core.output import default_output_folder
         from .cooperative.design_study import FormationFile, design_formation
 
+        args.formation = resolve_input(args.formation)
         config = load_config(args.formation, FormationFile)  # ConfigError -> exit 2, nothing written
         out = args.out if args.out is not None else default_output_folder(args.formation)
         study = design_formation(config)
@@ -39,3 +41,19 @@ class SteadyStateCommand:
         if s["formation"] == "cross":
             print(f"{s['stationary_point']}: a = {s['a']:.6g}, b = {s['b']:.6g}, tr P = {s['trace']:.6g} -> {out}")
         return 0
+
+
+def check_formation(data: dict, path: Path, kind: str = "formation") -> str:
+    """Validate a formation-design file's data; one line saying what it is (``ConfigError`` if invalid)."""
+    from ..core.config import parse_config
+    from .cooperative.design_study import FormationFile
+
+    config = parse_config(data, FormationFile, source=str(path))
+    n = config.noise
+    noise = f"σ process {n.sigma_process:g}, σ measurement {n.sigma_measurement:g}, σ Hessian {n.sigma_hessian:g}"
+    if config.formation == "custom":
+        return f"steady-state formation design: custom shape of {len(config.positions or [])} platforms, {noise}"
+    b = config.bounds
+    box = "" if b is None else f"a in [{b.a[0]:g}, {b.a[1]:g}], b in [{b.b[0]:g}, {b.b[1]:g}]"
+    sides = ", a = b imposed" if config.equal_sides else ""
+    return f"steady-state formation design: cross formation, {box}{sides}, {noise}"

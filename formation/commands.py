@@ -37,7 +37,7 @@ import argparse
 import sys
 from pathlib import Path
 
-__all__ = ["ReplayCommand", "SimulateCommand", "SIMULATION_KINDS"]
+__all__ = ["ReplayCommand", "SimulateCommand", "SIMULATION_KINDS", "check_scenario"]
 
 #: ``mobisense simulate KIND`` -> scenario kind of :mod:`mobisense.formation.scenarios`
 SIMULATION_KINDS: dict[str, str] = {"leader-follower": "leader_follower", "distributed": "distributed"}
@@ -49,7 +49,9 @@ class ReplayCommand:
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser) -> None:
         """Add the ``replay`` arguments."""
-        parser.add_argument("scenario", type=Path, help="scenario YAML file (see problems/replay_*.yaml)")
+        parser.add_argument(
+            "scenario", type=Path, help="scenario YAML file (see problems/replay_*.yaml) or a shipped example's name"
+        )
         parser.add_argument("--out", type=Path, default=None, help="output folder (default out/<file name>)")
         parser.add_argument("--seed", type=int, default=None, help="override the scenario's random seed")
         parser.add_argument("--no-plot", action="store_true", help="skip the figures")
@@ -61,9 +63,11 @@ class ReplayCommand:
     @staticmethod
     def run(args: argparse.Namespace) -> int:
         """Validate, replay, write the outputs; return the exit status."""
+        from ..core.examples import resolve_input
         from .replay.simulation import ReplayError
         from .scenarios import load_scenario
 
+        args.scenario = resolve_input(args.scenario)
         scenario = load_scenario(args.scenario, "replay")
         progress = not args.quiet and sys.stderr.isatty()
         try:
@@ -81,7 +85,7 @@ class SimulateCommand:
     def add_arguments(parser: argparse.ArgumentParser) -> None:
         """Add the ``simulate`` arguments."""
         parser.add_argument("kind", choices=sorted(SIMULATION_KINDS), help="which simulation")
-        parser.add_argument("scenario", type=Path, help="scenario YAML file")
+        parser.add_argument("scenario", type=Path, help="scenario YAML file, or a shipped example's name")
         parser.add_argument("--out", type=Path, default=None, help="output folder (default out/<file name>)")
         parser.add_argument("--no-plot", action="store_true", help="skip the figures")
         parser.add_argument("--seed", type=int, default=None, help="override the scenario's random seed")
@@ -89,9 +93,11 @@ class SimulateCommand:
     @staticmethod
     def run(args: argparse.Namespace) -> int:
         """Validate, simulate, write the outputs; return the exit status."""
+        from ..core.examples import resolve_input
         from .leader_follower.controls import FormationSingularityError
         from .scenarios import load_scenario
 
+        args.scenario = resolve_input(args.scenario)
         scenario = load_scenario(args.scenario, SIMULATION_KINDS[args.kind])
         try:
             result = scenario.run(args.seed, progress=sys.stderr.isatty())
@@ -112,3 +118,40 @@ def _save(result: object, args: argparse.Namespace, source: Path) -> int:
     result.save(out, figures=not args.no_plot)  # type: ignore[attr-defined]
     result.report(out)  # type: ignore[attr-defined]
     return 0
+
+
+def check_scenario(data: dict, path: Path, kind: str) -> str:
+    """Validate a scenario file of ``kind`` (and the files it names); one line saying what it is."""
+    from ..core.config import parse_config
+    from .scenarios import scenario_model
+
+    config = parse_config(data, scenario_model(kind), source=str(path))
+    if kind == "plan_replay":
+        from .replay.plan import resolve
+        from .replay.reference import reference_status
+
+        status = reference_status(resolve(path, config.solution), resolve(path, config.problem))
+        runs = config.monte_carlo.runs
+        return f"plan replay {config.name!r}: {status}; Monte Carlo with {runs} runs"
+    if kind == "field_replay":
+        return (
+            f"field replay {config.name!r}: {config.platforms.count} platforms, {config.formation.kind} formation, "
+            f"{config.motion.kind.replace('_', ' ')} motion on the field {config.field.kind!r} for "
+            f"{config.duration:g} {config.units.time}"
+        )
+    if kind == "replan":
+        return (
+            f"re-planning of {config.problem!r} every {config.replan.every:g} ({config.replan.horizon} horizon), "
+            f"{config.monte_carlo.runs} Monte Carlo runs"
+        )
+    if kind == "leader_follower":
+        runs = ", ".join(f"{name} ({control})" for name, control, _, _ in config.resolved_runs())
+        return (
+            f"leader–follower simulation {config.name!r}: a leader and {len(config.followers)} follower(s) "
+            f"for {config.duration:g} s; runs {runs}"
+        )
+    n_sensors, n_cells = len(config.network.positions), len(config.network.cells)
+    return (
+        f"distributed-filter simulation {config.name!r}: {n_sensors} sensors in {n_cells} cells, "
+        f"{config.time.duration:g} s sampled every {config.time.step:g} s"
+    )

@@ -24,7 +24,7 @@ from typing import Any
 
 from .simulation_result import SimulationResult
 
-__all__ = ["SCENARIO_KINDS", "Scenario", "load_scenario"]
+__all__ = ["SCENARIO_KINDS", "Scenario", "load_scenario", "scenario_model"]
 
 #: scenario kind -> "module:model class" of its file
 SCENARIO_KINDS: dict[str, str] = {
@@ -77,7 +77,8 @@ class Scenario:
         return run_distributed(self.config, seed, progress=progress)
 
 
-def _model(kind: str) -> Any:
+def scenario_model(kind: str) -> Any:
+    """The pydantic model of a scenario kind (a key of :data:`SCENARIO_KINDS`)."""
     import importlib
 
     module_name, _, name = SCENARIO_KINDS[kind].partition(":")
@@ -85,11 +86,15 @@ def _model(kind: str) -> Any:
 
 
 def replay_kind(data: Any, source: Path) -> str:
-    """``field_replay`` or ``plan_replay`` from the keys of a replay file; ``ConfigError`` if neither."""
+    """``field_replay`` or ``plan_replay`` from the ``kind`` or the keys of a replay file; else ``ConfigError``."""
     from ..core.config import ConfigError
+    from ..core.kinds import FILE_KINDS
 
-    if isinstance(data, dict) and data.get("kind") == "replan":
-        return "replan"
+    kind = data.get("kind") if isinstance(data, dict) else None
+    if kind in ("field_replay", "plan_replay", "replan"):
+        return str(kind)
+    if kind in FILE_KINDS:
+        raise ConfigError(f"{source}: kind: a {kind} file is not a replay: run it with {FILE_KINDS[kind].command}")
     if isinstance(data, dict) and "field" in data:
         return "field_replay"
     if isinstance(data, dict) and "solution" in data:
@@ -124,4 +129,4 @@ def load_scenario(path: str | Path, kind: str | None = None) -> Scenario:
         kind = replay_kind(data, path)
     if kind not in SCENARIO_KINDS:
         raise ConfigError(f"{path}: unknown scenario kind {kind!r}; expected one of {sorted(SCENARIO_KINDS)}")
-    return Scenario(kind, parse_config(data, _model(kind), source=str(path)), path)
+    return Scenario(kind, parse_config(data, scenario_model(kind), source=str(path)), path)

@@ -1,8 +1,9 @@
-"""The optimal-control commands: ``mobisense solve``, ``mobisense validate`` and ``mobisense sweep``.
+"""The optimal-control commands: ``mobisense solve`` and ``mobisense sweep``, and their files' checks.
 
 Each command is a class with a one-line docstring (its help text), ``add_arguments(parser)`` and
 ``run(args) -> int``; :mod:`mobisense.cli` registers them. Heavy modules are imported inside ``run``,
-so that ``mobisense --help`` stays fast.
+so that ``mobisense --help`` stays fast. :func:`check_problem` and :func:`check_sweep` validate a file
+of each kind for ``mobisense validate`` (see :mod:`mobisense.core.kinds`).
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-__all__ = ["SolveCommand", "ValidateCommand", "SweepCommand", "apply_overrides"]
+__all__ = ["SolveCommand", "SweepCommand", "apply_overrides", "check_problem", "check_sweep"]
 
 
 class SolveCommand:
@@ -23,7 +24,9 @@ class SolveCommand:
         """Add the ``solve`` arguments."""
         from .registries import HOMOTOPY_MODES, METHODS, SCHEMES, STRATEGIES
 
-        parser.add_argument("problem", type=Path, help="problem YAML file (see problems/hussein2008.yaml)")
+        parser.add_argument(
+            "problem", type=Path, help="problem YAML file, or the name of a shipped example (mobisense examples)"
+        )
         parser.add_argument("--out", type=Path, default=None, help="output folder (default: out/<file name>)")
         parser.add_argument("--method", choices=METHODS.names(), default=None, help="override solver.method")
         parser.add_argument("--intervals", type=int, default=None, help="override solver.collocation.intervals")
@@ -64,10 +67,12 @@ class SolveCommand:
     def run(args: argparse.Namespace) -> int:
         """Validate, solve, write outputs; exit 0 (solved), 1 (solver failure, partial results kept), 2 (bad input)."""
         from ..core.config import ConfigError, read_yaml
+        from ..core.examples import resolve_input
         from ..core.output import default_output_folder
         from .problem import Problem
         from .reporting import SolveReporter
 
+        args.problem = resolve_input(args.problem)
         data = apply_overrides(read_yaml(args.problem), args)
         problem = Problem.from_dict(data, source=str(args.problem))  # ConfigError -> exit 2, nothing written
         out = args.out if args.out is not None else default_output_folder(args.problem)
@@ -77,6 +82,9 @@ class SolveCommand:
         if args.multistart is not None:
             if args.multistart < 1 or problem.solver.method != "direct":
                 raise ConfigError(f"{args.problem}: --multistart: expected K >= 1 with solver.method 'direct'")
+            from ..core.extras import require_extra
+
+            require_extra("sweep", "mobisense solve --multistart")
             from .batch.multistart import solve_multistart
 
             solution = solve_multistart(problem, args.multistart, args.scheduler, args.workers)
@@ -122,28 +130,32 @@ def apply_overrides(data: dict[str, Any], args: argparse.Namespace) -> dict[str,
     return data
 
 
-class ValidateCommand:
-    """Validate problem files without solving: one line per file, exit 2 at the first invalid one."""
+def check_problem(data: dict[str, Any], path: Path, kind: str = "problem") -> str:
+    """Validate a problem file's data; one line saying what it is (``ConfigError`` if invalid)."""
+    from .problem import Problem
 
-    @staticmethod
-    def add_arguments(parser: argparse.ArgumentParser) -> None:
-        """Add the ``validate`` arguments."""
-        parser.add_argument("files", type=Path, nargs="+", help="problem YAML files")
+    problem = Problem.from_dict(data, source=str(path))
+    c, u = problem.solver.collocation, problem.units
+    return (
+        f"optimal-control problem {problem.name!r}: {_count(problem.n, 'process state')}, "
+        f"{_count(problem.N, 'sensor')}, "
+        f"t in [{problem.horizon.t0:g}, {problem.horizon.tf:g}] {u.time}, {problem.solver.method} method "
+        f"({c.scheme}, degree {c.degree}, {c.intervals} intervals), problem hash {problem.digest()}"
+    )
 
-    @staticmethod
-    def run(args: argparse.Namespace) -> int:
-        """Validate each file; print a one-line description of each valid problem."""
-        from .problem import load_problem
 
-        for path in args.files:
-            problem = load_problem(path)  # ConfigError -> exit 2 with file and key path
-            c = problem.solver.collocation
-            print(
-                f"{path}: valid — problem {problem.name!r}: n = {problem.n} states, N = {problem.N} sensors, "
-                f"t ∈ [{problem.horizon.t0:g}, {problem.horizon.tf:g}], {problem.solver.method} "
-                f"({c.scheme} d = {c.degree}, {c.intervals} intervals), hash {problem.digest()}"
-            )
-        return 0
+def _count(number: int, noun: str) -> str:
+    return f"{number} {noun}{'' if number == 1 else 's'}"
+
+
+def check_sweep(data: dict[str, Any], path: Path, kind: str = "sweep") -> str:
+    """Validate a sweep file, its base problem and every task it expands to; one line saying what it is."""
+    from .batch.sweep import expand_sweep, load_sweep
+
+    spec, base = load_sweep(path)
+    tasks = expand_sweep(spec, base, source=str(path))
+    sizes = " x ".join(f"{key} ({len(values)} values)" for key, values in spec.vary.items())
+    return f"parameter sweep ({spec.mode}) of {len(tasks)} tasks over {sizes}, base problem {base.name!r}"
 
 
 class SweepCommand:
@@ -152,7 +164,7 @@ class SweepCommand:
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser) -> None:
         """Add the ``sweep`` arguments."""
-        parser.add_argument("sweep", type=Path, help="sweep YAML file (base problem, mode, vary)")
+        parser.add_argument("sweep", type=Path, help="sweep YAML file (base problem, mode, vary) or a shipped example")
         parser.add_argument("--out", type=Path, default=None, help="output folder (default out/<file name>)")
         parser.add_argument("--scheduler", default=None, help="address of a running dask scheduler (tcp://…)")
         parser.add_argument("--workers", type=int, default=None, help="local worker processes (default: one per core)")
@@ -165,13 +177,18 @@ class SweepCommand:
             help="wall-clock limit of each Ipopt solve of a task (sets solver.time_limit)",
         )
         parser.add_argument("--quiet", action="store_true", help="no progress display")
+        parser.add_argument("--no-plot", action="store_true", help="skip cost.png (the cost over the varied keys)")
 
     @staticmethod
     def run(args: argparse.Namespace) -> int:
         """Validate the whole sweep, then run the tasks not finished before; write rows as they complete."""
+        from ..core.examples import resolve_input
+        from ..core.extras import require_extra
         from ..core.output import default_output_folder
         from .batch.sweep_runner import run_sweep
 
+        require_extra("sweep", "mobisense sweep")
+        args.sweep = resolve_input(args.sweep)
         out = args.out if args.out is not None else default_output_folder(args.sweep)
         result = run_sweep(
             args.sweep,
@@ -182,4 +199,8 @@ class SweepCommand:
             time_limit=args.time_limit,
             quiet=args.quiet,
         )
+        if not args.no_plot and len(result.table):
+            from .batch.sweep_plots import save_sweep_figures
+
+            save_sweep_figures(result)
         return 0 if result.summary["counts"]["error"] == 0 else 1

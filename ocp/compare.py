@@ -100,12 +100,12 @@ class ComparedSolution(Solution):
 
     indirect: Solution | None = None
 
-    def dataset_parts(self) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
-        """The direct dataset's parts plus ``indirect_*`` variables on their own ``time_indirect`` axis."""
-        data, coords, attrs = super().dataset_parts()
+    def to_dataset(self) -> Any:
+        """The direct dataset plus ``indirect_*`` variables on their own ``time_indirect`` axis."""
+        ds = super().to_dataset()
         other = self.indirect
         if other is None:
-            return data, coords, attrs
+            return ds
         dims = {
             "Sigma": ("time_indirect", "row", "col"),
             "p": ("time_indirect", "sensor", "xy"),
@@ -115,11 +115,12 @@ class ComparedSolution(Solution):
             "lam_p": ("time_indirect", "sensor", "xy"),
             "lam_v": ("time_indirect", "sensor", "xy"),
         }
-        coords = {**coords, "time_indirect": other.t}
-        data = dict(data)
+        from .solution_dataset import variable_attrs
+
+        ds = ds.assign_coords(time_indirect=("time_indirect", other.t, variable_attrs(self, "time_indirect")))
         for name, dim in dims.items():
-            data[f"indirect_{name}"] = (dim, getattr(other, name), {"long_name": f"{name} of the indirect solution"})
-        return data, coords, attrs
+            ds[f"indirect_{name}"] = (dim, getattr(other, name), variable_attrs(self, name, " (indirect solution)"))
+        return ds
 
 
 def _bvp_block(bvp: BVPSolution, solver: str, time_s: float) -> dict[str, Any]:

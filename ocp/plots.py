@@ -1,4 +1,9 @@
-"""Figures of a solution: paths over noise contours, Σ(t), u(t), and the homotopy path (cost vs ε)."""
+"""Figures of a solution: paths, Σ(t) against the no-control baseline, u(t), the homotopy and the continuation.
+
+``paths.png`` (paths over the noise level, homotopy paths coloured by ε), ``covariance.png``,
+``controls.png``, ``homotopy.png`` (J_ε and iterations per ε step) and, when the indirect method ran,
+``continuation.png`` (the arclength continuation in ε with its folds).
+"""
 
 from __future__ import annotations
 
@@ -12,7 +17,17 @@ from .path_constraints import draw_constraints
 from .registries import NOISE_MODELS
 from .solution import Solution
 
-__all__ = ["effective_noise", "plot_paths", "plot_covariance", "plot_controls", "plot_homotopy", "save_figures"]
+__all__ = [
+    "FIGURES",
+    "effective_noise",
+    "coasting_covariance",
+    "plot_paths",
+    "plot_covariance",
+    "plot_controls",
+    "plot_homotopy",
+    "plot_continuation",
+    "save_figures",
+]
 
 
 def effective_noise(solution: Solution, sensor: int, points: np.ndarray) -> np.ndarray:
@@ -28,11 +43,17 @@ def effective_noise(solution: Solution, sensor: int, points: np.ndarray) -> np.n
     return 1.0 / np.asarray(f(points.T)).ravel()
 
 
+def _label(solution: Solution, **powers: int) -> str:
+    return solution.problem.units.system().label(**powers)
+
+
 def plot_paths(solution: Solution):  # noqa: ANN201  (matplotlib Figure)
-    """Sensor paths in the plane over contours of sensor 1's noise level; homotopy paths in grey."""
+    """Sensor paths over contours of the first sensor's noise level; the homotopy paths coloured by ε."""
     import matplotlib.pyplot as plt
+    from matplotlib.colors import Normalize
 
     problem = solution.problem
+    length = _label(solution, length=1)
     locs = np.asarray(problem.process.locations)
     pts = np.concatenate([solution.p.reshape(-1, 2), locs])
     lo, hi = pts.min(axis=0), pts.max(axis=0)
@@ -41,54 +62,72 @@ def plot_paths(solution: Solution):  # noqa: ANN201  (matplotlib Figure)
     ys = np.linspace(lo[1] - pad, hi[1] + pad, 160)
     X, Y = np.meshgrid(xs, ys)
     R = effective_noise(solution, 0, np.column_stack([X.ravel(), Y.ravel()])).reshape(X.shape)
-    fig, ax = plt.subplots(figsize=(6.4, 5.6))
+    fig, ax = plt.subplots(figsize=(6.8, 6.4))
     cs = ax.contourf(X, Y, np.log10(R), levels=20, cmap="Blues_r", alpha=0.8)
-    fig.colorbar(cs, ax=ax, label=f"log10 noise variance of sensor {problem.sensors[0].name}")
+    fig.colorbar(cs, ax=ax, label=f"log10 of the noise variance of sensor {problem.sensors[0].name}")
+    # the process locations go under everything, so that a sensor ending on one stays visible
+    ax.plot(*locs.T, "*", color="red", mec="darkred", ms=10, label="process locations", zorder=2)
     if solution.path_p is not None and len(solution.path_eps) > 1:
-        cmap = plt.get_cmap("autumn")
+        cmap, norm = plt.get_cmap("autumn"), Normalize(0.0, 1.0)
         for k, eps in enumerate(solution.path_eps[:-1]):
             for i in range(problem.N):
-                ax.plot(*solution.path_p[k, :, i].T, color=cmap(float(eps)), lw=0.8, alpha=0.7)
-        ax.plot([], [], color=cmap(0.0), lw=0.8, label="homotopy paths (ε < 1)")
+                ax.plot(*solution.path_p[k, :, i].T, color=cmap(norm(float(eps))), lw=0.8, alpha=0.8, zorder=3)
+        key = fig.colorbar(plt.cm.ScalarMappable(norm, cmap), ax=ax, orientation="horizontal", pad=0.12,
+                           fraction=0.05, aspect=40)  # fmt: skip
+        key.set_label("ε of the homotopy paths (thin lines; the thick line is ε = 1)")
     for i, sensor in enumerate(problem.sensors):
-        line = ax.plot(*solution.p[:, i].T, lw=2.2, label=f"{sensor.name} (ε = {solution.eps:g})")[0]
-        ax.plot(*solution.p[0, i], "o", color=line.get_color(), ms=7)
-        ax.plot(*solution.p[-1, i], "s", color=line.get_color(), ms=7)
-    ax.plot(*locs.T, "r*", ms=14, label="process locations")
+        line = ax.plot(*solution.p[:, i].T, lw=2.2, label=f"{sensor.name} (ε = {solution.eps:g})", zorder=4)[0]
+        colour = line.get_color()
+        ax.plot(*solution.p[0, i], "o", color=colour, mec="k", ms=8, zorder=5, label="start" if i == 0 else None)
+        ax.plot(*solution.p[-1, i], "s", mfc="none", mec=colour, mew=2.2, ms=13, zorder=6,
+                label="end" if i == 0 else None)  # hollow: a process location under it stays visible  # fmt: skip
     draw_constraints(ax, problem.constraints)
-    ax.set_xlabel("x (L)")
-    ax.set_ylabel("y (L)")
+    ax.set_xlabel(f"x ({length})")
+    ax.set_ylabel(f"y ({length})")
     ax.set_aspect("equal")
-    ax.set_title(f"{problem.name}: sensor paths (o start, □ end)")
+    ax.set_title(f"{problem.name}: optimal sensor paths")
     ax.legend(loc="best", fontsize=8)
     return fig
 
 
+def coasting_covariance(solution: Solution) -> np.ndarray:
+    """Σ(t) of the no-control baseline (sensors coasting, u ≡ 0: the classical Kalman filter) on ``solution.t``."""
+    from .model import SensorKalmanModel, Structure
+    from .simulate import coast
+
+    model = SensorKalmanModel(Structure.of(solution.problem))
+    P = model.layout.pack(model.layout.values(solution.problem))
+    x = coast(model, P, solution.t).x
+    return solution.layout.split(x)[0]
+
+
 def plot_covariance(solution: Solution):  # noqa: ANN201
-    """Tr Σ(t) and the entries of Σ(t), with the coasting (classical Kalman) baseline when available."""
+    """Tr Σ(t) of the optimum and of the no-control baseline; the entries of Σ(t) when n > 1."""
     import matplotlib.pyplot as plt
 
     n = solution.problem.n
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    time, variance = _label(solution, time=1), _label(solution, state=2)
+    baseline = coasting_covariance(solution)
+    feasible = solution.baseline_feasible
+    fig, axes = plt.subplots(1, 2 if n > 1 else 1, figsize=(11, 4.2) if n > 1 else (6.4, 4.2), squeeze=False)
+    ax1 = axes[0, 0]
+    ax1.semilogy(solution.t, np.trace(baseline, axis1=1, axis2=2), "--", color="0.35", lw=1.6,
+                 label="no control (u ≡ 0)" + ("" if feasible else ", violates the terminal constraints"))  # fmt: skip
     ax1.semilogy(solution.t, np.trace(solution.Sigma, axis1=1, axis2=2), lw=2, label=f"optimal (ε = {solution.eps:g})")
-    if solution.path_Sigma is not None and len(solution.path_eps) > 0:
-        ax1.semilogy(
-            solution.t,
-            np.trace(solution.path_Sigma[0], axis1=1, axis2=2),
-            "--",
-            label=f"first homotopy step (ε = {solution.path_eps[0]:g})",
-        )
-    ax1.set_xlabel("t (T)")
-    ax1.set_ylabel("Tr Σ(t)")
-    ax1.set_title("trace of the error covariance")
-    ax1.legend()
-    for i in range(n):
-        for j in range(i, n):
-            ax2.plot(solution.t, solution.Sigma[:, i, j], label=f"Σ[{i},{j}]")
-    ax2.set_yscale("symlog", linthresh=1e-2)
-    ax2.set_xlabel("t (T)")
-    ax2.set_title("entries of Σ(t)")
-    ax2.legend(fontsize=8, ncol=max(1, n // 2))
+    ax1.set_xlabel(f"time ({time})")
+    ax1.set_ylabel(f"trace of Σ(t) ({variance})" if n > 1 else f"Σ(t) ({variance})")
+    ax1.set_title("estimation error covariance" + (": trace" if n > 1 else ""))
+    ax1.legend(fontsize=8)
+    if n > 1:
+        ax2 = axes[0, 1]
+        for i in range(n):
+            for j in range(i, n):
+                ax2.plot(solution.t, solution.Sigma[:, i, j], label=f"Σ[{i},{j}]")
+        ax2.set_yscale("symlog", linthresh=1e-2)
+        ax2.set_xlabel(f"time ({time})")
+        ax2.set_ylabel(f"entry of Σ(t) ({variance})")
+        ax2.set_title("entries of Σ(t), optimal")
+        ax2.legend(fontsize=8, ncol=max(1, n // 2))
     fig.tight_layout()
     return fig
 
@@ -103,46 +142,84 @@ def plot_controls(solution: Solution):  # noqa: ANN201
         ax.plot(solution.t_u, solution.u[:, i, 0], ":", color=line.get_color(), label=f"u_x {sensor.name}")
         ax.plot(solution.t_u, solution.u[:, i, 1], "--", color=line.get_color(), label=f"u_y {sensor.name}")
         if sensor.u_max is not None:
-            ax.axhline(sensor.u_max, color=line.get_color(), lw=0.8, alpha=0.6)
-    ax.set_xlabel("t (T)")
-    ax.set_ylabel("u (L/T²)")
-    ax.set_title("sensor controls")
+            ax.axhline(sensor.u_max, color=line.get_color(), lw=0.8, alpha=0.6, label=f"bound on |u| {sensor.name}")
+    ax.set_xlabel(f"time ({_label(solution, time=1)})")
+    ax.set_ylabel(f"acceleration u ({_label(solution, length=1, time=-2)})")
+    ax.set_title("sensor controls (accelerations)")
     ax.legend(fontsize=8, ncol=2)
     return fig
 
 
 def plot_homotopy(solution: Solution):  # noqa: ANN201
-    """J_ε and Ipopt iterations along the ε continuation."""
+    """J_ε and the solver iterations of each step of the ε continuation."""
     import matplotlib.pyplot as plt
 
     steps = solution.homotopy
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     ok = [s for s in steps if s.success]
     bad = [s for s in steps if not s.success]
-    ax.plot([s.eps for s in ok], [s.cost for s in ok], "o-", label="J_ε (converged)")
-    if bad:
-        ax.plot([s.eps for s in bad], [s.cost for s in bad], "rx", ms=9, label="failed steps")
-    ax.set_xlabel("ε")
-    ax.set_ylabel("J_ε")
-    ax.set_title("homotopy path")
+    iterations = "Newton iterations (BVP)" if solution.method == "indirect" else "Ipopt iterations"
     ax2 = ax.twinx()
     ax2.bar([s.eps for s in steps], [s.iterations for s in steps], width=0.02, alpha=0.3, color="grey")
-    ax2.set_ylabel("Newton iterations (BVP)" if solution.method == "indirect" else "Ipopt iterations")
+    ax2.set_ylabel(f"{iterations} of the step (grey bars)")
+    ax.set_zorder(ax2.get_zorder() + 1)
+    ax.patch.set_visible(False)
+    ax.plot([s.eps for s in ok], [s.cost for s in ok], "o-", label="J_ε of the converged steps")
+    if bad:
+        ax.plot([s.eps for s in bad], [s.cost for s in bad], "rx", ms=9, label="failed steps")
+    ax.set_xlabel("ε (homotopy parameter; 1: the original problem)")
+    ax.set_ylabel("cost J_ε")
+    ax.set_title("homotopy path")
     ax.legend(loc="upper right")
     return fig
 
 
+def plot_continuation(solution: Solution):  # noqa: ANN201
+    """The indirect method's arclength continuation: Tr Σ(tf) against ε on the solution curve, with its folds.
+
+    Plain stepping in ε stops at a fold (dε/ds changes sign); the arclength continuation follows the curve
+    around it. ``None`` when the solution has no indirect continuation record.
+    """
+    import matplotlib.pyplot as plt
+
+    indirect = solution.stats.get("indirect") or {}
+    curve = indirect.get("curve") or {}
+    eps, trace = np.asarray(curve.get("eps", []), float), np.asarray(curve.get("trace_sigma_tf", []), float)
+    if eps.size < 2:
+        return None
+    fig, ax = plt.subplots(figsize=(6.8, 4.4))
+    ax.plot(eps, trace, "-", color="tab:blue", lw=1.4, label="solution curve (arclength steps)")
+    ax.plot(eps, trace, ".", color="tab:blue", ms=4)
+    turns = np.flatnonzero(np.diff(np.sign(np.diff(eps))) != 0) + 1
+    if turns.size:
+        ax.plot(eps[turns], trace[turns], "o", mfc="none", mec="tab:red", mew=1.8, ms=10, zorder=5,
+                label="folds: " + ", ".join(f"ε ≈ {f:.3g}" for f in indirect.get("folds", eps[turns])))  # fmt: skip
+    ax.set_xscale("log")
+    ax.set_xlabel("ε (log scale)")
+    ax.set_ylabel(f"trace of Σ(tf) ({_label(solution, state=2)})")
+    ax.set_title(f"{solution.problem.name}: continuation of the PMP boundary-value problem in ε")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3, which="both")
+    return fig
+
+
+#: file name -> figure of a solution (``None`` when it does not apply)
+FIGURES = {
+    "paths.png": plot_paths,
+    "covariance.png": plot_covariance,
+    "controls.png": plot_controls,
+    "homotopy.png": plot_homotopy,
+    "continuation.png": plot_continuation,
+}
+
+
 def save_figures(solution: Solution, folder: str | Path) -> list[Path]:
-    """Write paths.png, covariance.png, controls.png and homotopy.png into ``folder``."""
+    """Write paths.png, covariance.png, controls.png, homotopy.png (and continuation.png) into ``folder``."""
     folder = Path(folder)
-    figures = {
-        "paths.png": plot_paths,
-        "covariance.png": plot_covariance,
-        "controls.png": plot_controls,
-        "homotopy.png": plot_homotopy,
-    }
     written = []
-    for name, draw in figures.items():
-        write_figure(folder / name, lambda draw=draw: draw(solution))
-        written.append(folder / name)
+    for name, draw in FIGURES.items():
+        figure = draw(solution)
+        if figure is not None:
+            write_figure(folder / name, lambda figure=figure: figure)  # saves and closes it
+            written.append(folder / name)
     return written

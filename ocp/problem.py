@@ -1,8 +1,10 @@
 """The mobile-sensor Kalman optimal-control problem (docs/theory/ocp.md) and its YAML schema.
 
 A :class:`Problem` is a validated pydantic model (the YAML file is its serialisation) with numpy
-accessors for the matrices. Units are the user's: positions in length units L, time in T; the
-cost is dimensionless only if the user's matrices make it so.
+accessors for the matrices. Units are declared by the optional ``units`` block (:class:`Units`):
+positions in the length unit L (default metre), times in the time unit T (default second), the process
+state and the cost in units of their own (default dimensionless, "1"). Docstrings write L and T for
+them; every output file carries the declared units as UDUNITS strings.
 
 Example file (``problems/hussein2008.yaml``)::
 
@@ -40,11 +42,13 @@ from ..core.config import (
     load_config,
     parse_config,
 )
+from ..core.units import LengthUnit, PhysicalUnit, TimeUnit, UnitSystem
 from .noise_models import NoiseModel, parse_noise
 from .path_constraints import PathConstraints, check_initial_state
 from .registries import BVPSolverName, HomotopyModeName, MethodName, SchemeName, StrategyName
 
 __all__ = [
+    "Units",
     "Horizon",
     "Process",
     "Terminal",
@@ -59,11 +63,29 @@ __all__ = [
 ]
 
 
+class Units(StrictModel):
+    """Units of the numbers of a problem file (UDUNITS symbols; ``"1"`` for a dimensionless quantity).
+
+    Only labels: the mathematics is the same in any consistent units. They are written into every
+    output file (``solution.nc``: ``p`` in ``length``, ``v`` in ``length time-1``, ``Sigma`` in
+    ``state2``, the costates in ``cost`` per unit of their state).
+    """
+
+    length: LengthUnit = Field("m", description="unit of positions, locations, distances (L)")
+    time: TimeUnit = Field("s", description="unit of times (T)")
+    state: PhysicalUnit = Field("1", description="unit of the process state x (Σ is in state²)")
+    cost: PhysicalUnit = Field("1", description="unit of the cost J (set by the weights M, K, alpha)")
+
+    def system(self) -> UnitSystem:
+        """The :class:`~mobisense.core.units.UnitSystem` that composes the units of derived quantities."""
+        return UnitSystem(self.length, self.time, {"state": self.state, "cost": self.cost})
+
+
 class Horizon(StrictModel):
     """Time horizon [t0, tf] (T)."""
 
-    t0: FiniteFloat = 0.0
-    tf: FiniteFloat
+    t0: FiniteFloat = Field(0.0, description="start time (T)")
+    tf: FiniteFloat = Field(description="final time (T), > t0")
 
     @model_validator(mode="after")
     def _ordered(self) -> Horizon:
@@ -75,10 +97,10 @@ class Horizon(StrictModel):
 class Process(StrictModel):
     """The process ``x' = A x + B w``, ``E[w w'] = Q``, its initial error covariance and locations."""
 
-    A: Matrix
-    B: Matrix
-    Q: Matrix
-    Sigma0: Matrix
+    A: Matrix = Field(description="n×n state matrix of x' = A x + B w (1/T)")
+    B: Matrix = Field(description="n×m noise input matrix")
+    Q: Matrix = Field(description="m×m intensity of the white process noise w (symmetric, PSD)")
+    Sigma0: Matrix = Field(description="n×n initial error covariance (symmetric positive definite)")
     locations: list[Vector2] = Field(description="one planar location per state (L)")
 
     @model_validator(mode="after")
@@ -102,28 +124,30 @@ class Process(StrictModel):
 class Terminal(StrictModel):
     """Fixed terminal sensor position and/or velocity (omitted = free)."""
 
-    p: Vector2 | None = None
-    v: Vector2 | None = None
+    p: Vector2 | None = Field(None, description="fixed terminal position [x, y] (L)")
+    v: Vector2 | None = Field(None, description="fixed terminal velocity [vx, vy] (L/T)")
 
 
 class Sensor(StrictModel):
     """One mobile sensor: a planar double integrator ``p' = v, v' = u`` with a noise model."""
 
-    name: str
-    p0: Vector2
-    v0: Vector2
-    noise: Annotated[SerializeAsAny[NoiseModel], BeforeValidator(parse_noise)]
+    name: str = Field(description="sensor name (unique), used in outputs")
+    p0: Vector2 = Field(description="initial position [x, y] (L)")
+    v0: Vector2 = Field(description="initial velocity [vx, vy] (L/T)")
+    noise: Annotated[SerializeAsAny[NoiseModel], BeforeValidator(parse_noise)] = Field(
+        description="measurement-noise model {model: NAME, parameters…}: variance as a function of position"
+    )
     measures: Matrix | None = Field(default=None, description="rows of C_i (default: every state)")
-    terminal: Terminal | None = None
+    terminal: Terminal | None = Field(None, description="fixed terminal position and/or velocity (default: free)")
     u_max: PositiveFloat | None = Field(default=None, description="bound on |u_i| (L/T^2)")
 
 
 class Cost(StrictModel):
     """Cost weights: ``J = Tr[M Σ(tf)] + ∫ (alpha/2 |u|^2 + Tr[K Σ]) dt``."""
 
-    M: Matrix
-    K: Matrix | None = None
-    alpha: PositiveFloat
+    M: Matrix = Field(description="n×n terminal weight of Tr[M Σ(tf)] (symmetric positive definite)")
+    K: Matrix | None = Field(None, description="n×n running weight of ∫ Tr[K Σ] dt (symmetric PSD; default 0)")
+    alpha: PositiveFloat = Field(description="control weight α of ∫ α/2 |u|² dt")
 
 
 class CollocationOptions(StrictModel):
@@ -200,15 +224,17 @@ class SolverOptions(StrictModel):
 class Problem(StrictModel):
     """A mobile-sensor Kalman optimal-control problem (docs/theory/ocp.md §1–§2) plus its solver options."""
 
-    name: str = Field(pattern=r"^[A-Za-z0-9_.\-]+$")
-    horizon: Horizon
-    process: Process
-    sensors: list[Sensor] = Field(min_length=1)
-    cost: Cost
+    kind: Literal["problem"] | None = Field(None, description="file kind (optional for problem files)")
+    name: str = Field(pattern=r"^[A-Za-z0-9_.\-]+$", description="problem name (letters, digits, _ . -)")
+    units: Units = Field(Units(), description="units of the file's numbers (default metre, second)")
+    horizon: Horizon = Field(description="time horizon [t0, tf]")
+    process: Process = Field(description="the estimated process and its initial error covariance")
+    sensors: list[Sensor] = Field(min_length=1, description="the mobile sensors (at least one)")
+    cost: Cost = Field(description="weights of J = Tr[M Σ(tf)] + ∫ (α/2 |u|² + Tr[K Σ]) dt")
     constraints: PathConstraints | None = Field(
         None, description="path constraints of the sensors (direct method; docs/theory/path_constraints.md)"
     )
-    solver: SolverOptions = SolverOptions()
+    solver: SolverOptions = Field(SolverOptions(), description="how to solve (method, grid, homotopy, tolerances)")
 
     @model_validator(mode="after")
     def _cross_checks(self) -> Problem:
@@ -285,13 +311,32 @@ class Problem(StrictModel):
         rows = np.abs(self.measurement_rows(i))
         return (rows @ self.matrices()["locations"]) / rows.sum(axis=1, keepdims=True)
 
+    def coasting_violations(self) -> list[str]:
+        """The constraints the no-control baseline (every sensor coasting, u ≡ 0) violates, one line each.
+
+        Coasting from ``p0, v0`` ends at ``p0 + v0 (tf − t0)`` with velocity ``v0``; a fixed terminal
+        position or velocity other than that is violated (to 1e-9 relative). ``u_max`` always holds.
+        """
+        duration = self.horizon.tf - self.horizon.t0
+        out = []
+        for i, sensor in enumerate(self.sensors):
+            if sensor.terminal is None:
+                continue
+            p0, v0 = np.asarray(sensor.p0, float), np.asarray(sensor.v0, float)
+            for key, end in (("p", p0 + v0 * duration), ("v", v0)):
+                target = getattr(sensor.terminal, key)
+                if target is not None and np.abs(end - target).max() > 1e-9 * max(1.0, np.abs(target).max()):
+                    out.append(f"sensors[{i}].terminal.{key}: coasting ends at ({end[0]:g}, {end[1]:g}), "
+                               f"not ({target[0]:g}, {target[1]:g})")  # fmt: skip
+        return out
+
     # ------------------------------------------------------------------ identity
     def normalised(self) -> dict[str, Any]:
         """The problem as a plain dict with every default filled in (what is hashed and stored)."""
-        return self.model_dump(mode="json")
+        return self.model_dump(mode="json", exclude={"kind"})
 
     def digest(self) -> str:
-        """SHA-256 (hex, 16 chars) of the normalised problem including solver options."""
+        """The first 16 hex digits (64 bits) of the SHA-256 of the normalised problem with its solver options."""
         text = json.dumps(self.normalised(), sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -312,5 +357,10 @@ class Problem(StrictModel):
 
 
 def load_problem(path: str | Path) -> Problem:
-    """Read and validate a problem YAML file; raises :class:`mobisense.core.config.ConfigError` (one line)."""
-    return load_config(path, Problem)
+    """Read and validate a problem YAML file, or a shipped example by name (``load_problem("hussein2008")``).
+
+    Raises :class:`mobisense.core.config.ConfigError` (one line naming the file and the key path).
+    """
+    from ..core.examples import resolve_input
+
+    return load_config(resolve_input(path), Problem)

@@ -60,27 +60,32 @@ class SolveReporter:
             return
         s = solution.summary()
         steps = solution.homotopy
-        table = Table(title=f"{solution.problem.name} — {solution.method} — {solution.status}", show_header=False)
+        table = Table(
+            title=f"{solution.problem.name} — {solution.method} method — {solution.status.value}", show_header=False
+        )
         table.add_column("quantity")
-        table.add_column("value", justify="right")
+        table.add_column("value", justify="left")
         table.add_row("J (ε = 1)", f"{s['cost']:.10g}")
         table.add_row("  terminal Tr[MΣ(tf)]", f"{s['terminal_cost']:.10g}")
         table.add_row("  running ∫(α/2|u|² + Tr KΣ)", f"{s['running_cost']:.6g}")
         table.add_row("  control energy ∫α/2|u|²", f"{s['control_energy']:.6g}")
         base = solution.baseline.get("cost")
         if base is not None:
-            table.add_row("no-control baseline J", f"{base:.10g}")
-            table.add_row("improvement", f"{s['improvement_percent']:.2f} %")
-        if steps:
-            table.add_row("homotopy steps", f"{len(steps)} (ε reached {solution.eps:g})")
-            solver = "Newton" if solution.method == "indirect" else "Ipopt"
-            table.add_row(
-                f"{solver} iterations", f"{sum(x.iterations for x in steps)} (first step {steps[0].iterations})"
-            )
-            table.add_row("solve time", f"{s['solve_time_s']:.3f} s (first step {steps[0].time_s:.3f} s)")
+            table.add_row("no-control baseline J (u ≡ 0)", f"{base:.10g}")
+            if s["baseline_feasible"]:
+                table.add_row("improvement over the baseline", f"{s['improvement_percent']:.2f} %")
+            else:
+                table.add_row("improvement over the baseline", "none quoted: the baseline is infeasible")
+                for violation in s["baseline_violations"]:
+                    table.add_row("  baseline violates", violation)
+        if steps and solution.method != "indirect":  # the indirect rows below tell its continuation
+            table.add_row("homotopy: ε steps", f"{len(steps)} (ε reached {solution.eps:g})")
+            iterations = sum(x.iterations for x in steps)
+            table.add_row("  Ipopt iterations", f"{iterations} (first step {steps[0].iterations})")
+            table.add_row("  time of the ε steps", f"{s['solve_time_s']:.3f} s (first step {steps[0].time_s:.3f} s)")
         if "build_time_s" in s:
             table.add_row("transcription build", f"{s['build_time_s']:.3f} s")
-        table.add_row("min eig Σ(t)", f"{s['min_sigma_eigenvalue']:.4g}")
+        table.add_row("smallest eigenvalue of Σ(t)", f"{s['min_sigma_eigenvalue']:.4g}")
         self._indirect_rows(table, s)
         multistart = s.get("multistart")
         if multistart:
@@ -94,17 +99,42 @@ class SolveReporter:
         self.console.print(table)
 
     @staticmethod
+    def _continuation_rows(table: Table, indirect: dict) -> None:
+        """The indirect solve: result, and one account of its ε steps, arclength steps and time."""
+        records = indirect["homotopy"]
+        steps = [r for r in records if r.get("eps", 0.0) > 0.0]
+        start = sum(r["time_s"] for r in records if r.get("eps", 0.0) == 0.0)
+        stepping = sum(r["time_s"] for r in steps)
+        polish = (indirect.get("polish") or {}).get("time_s", 0.0)
+        total = indirect["time_s"]
+        polished = f", polished by solve_bvp on {indirect['polish']['nodes']} nodes" if polish else ""
+        table.add_row(
+            "indirect (PMP BVP)",
+            f"J = {indirect['cost']:.10g}, {indirect['status']}; {indirect['solver']} BVP solver{polished}",
+        )
+        if not steps:
+            table.add_row("  time", f"{total:.3f} s")
+            return
+        folds = ", ".join(f"{f:.3g}" for f in indirect["folds"]) or "none"
+        rejected = sum(r.get("rejected_steps", 0) for r in steps)
+        table.add_row(
+            "  continuation in ε",
+            f"{len(steps)} ε steps taken as {indirect['arclength_steps']} arclength steps ({rejected} rejected); "
+            f"{indirect['newton_iterations']} Newton iterations; folds at ε = {folds}",
+        )
+        table.add_row(
+            "  time",
+            f"{total:.3f} s in all: ε steps {stepping:.3f} s, Kalman (ε = 0) BVP {start:.3f} s"
+            + (f", polish {polish:.3f} s" if polish else "")
+            + f", set-up {max(total - stepping - start - polish, 0.0):.3f} s",
+        )
+
+    @staticmethod
     def _indirect_rows(table: Table, s: dict) -> None:
         """Rows of the indirect continuation, the direct-seeded refinement and the agreement (if present)."""
         indirect = s.get("indirect")
         if indirect:
-            folds = ", ".join(f"{f:.4g}" for f in indirect["folds"]) or "none"
-            table.add_row(
-                "indirect (PMP BVP)",
-                f"J = {indirect['cost']:.10g}, {indirect['status']}, {indirect['time_s']:.3f} s, "
-                f"{indirect['nodes']} nodes ({indirect['solver']})",
-            )
-            table.add_row("  continuation", f"{indirect['arclength_steps']} arclength steps; folds at ε = {folds}")
+            SolveReporter._continuation_rows(table, indirect)
         seeded = s.get("seeded")
         if seeded:
             table.add_row(
@@ -123,7 +153,7 @@ class SolveReporter:
         for method, residuals in (s.get("optimality") or {}).items():
             if residuals:
                 table.add_row(
-                    f"  {method}: |∂H/∂u|, transv., ΔH",
+                    f"  {method}: |∂H/∂u|, transversality, ΔH",
                     f"{residuals['dH_du']:.1e}, {residuals['transversality']:.1e}, "
                     f"{residuals['hamiltonian_variation']:.1e}",
                 )

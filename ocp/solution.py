@@ -9,16 +9,14 @@ and as attributes the normalised problem (YAML), the summary (JSON) and the solv
 
 from __future__ import annotations
 
-import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
-from ..core.files import to_jsonable, write_json, write_netcdf_variables
+from ..core.files import to_jsonable, write_json, write_netcdf
 from .problem import Problem
 from .state_layout import StateLayout
 
@@ -35,9 +33,9 @@ class SolveStatus(str, Enum):
 class StartKind(str, Enum):
     """How a direct solve started (``stats["start"]``; the value is what ``summary.json`` shows)."""
 
-    CONTINUATION = "from coasting (solver.strategy)"
+    CONTINUATION = "continuation from coasting"
     WARM = "warm start from init"
-    WARM_FAILED = "warm start from init failed; from coasting (solver.strategy)"
+    WARM_FAILED = "warm start from init failed; continuation from coasting"
     GUESS = "initial guess, ε = 1 directly"
     INIT_WITHOUT_POINT = "init ignored: it carries no converged ε = 1 NLP point"
     INIT_OTHER_LAYOUT = "init ignored: different structure or grid"
@@ -56,7 +54,7 @@ class TrajectorySample:
 
 @dataclass
 class HomotopyStep:
-    """One solve of a start: ε, J_ε, Ipopt iterations and status, wall time (s), which start it belongs to."""
+    """One continuation step: ε, J_ε, Ipopt iterations and status, wall time (s)."""
 
     eps: float
     cost: float
@@ -64,7 +62,6 @@ class HomotopyStep:
     status: str
     time_s: float
     success: bool = True
-    start: str = ""
 
 
 @dataclass
@@ -216,9 +213,19 @@ class Solution:
         """Smallest eigenvalue of Σ(t) over the state grid (must be > 0)."""
         return float(np.linalg.eigvalsh(self.Sigma).min())
 
+    @property
+    def baseline_feasible(self) -> bool:
+        """Whether the no-control baseline satisfies the problem's constraints (else no improvement is quoted)."""
+        return not self.problem.coasting_violations()
+
+    @property
+    def improvement_percent(self) -> float | None:
+        """``100 (J_baseline − J) / J_baseline``; None without a baseline or when the baseline is infeasible."""
+        base = self.baseline.get("cost")
+        return None if not base or not self.baseline_feasible else 100.0 * (base - self.cost) / base
+
     def summary(self) -> dict[str, Any]:
         """The ``summary.json`` contract (see README)."""
-        base = self.baseline.get("cost")
         out: dict[str, Any] = {
             "name": self.problem.name,
             "method": self.method,
@@ -231,18 +238,13 @@ class Solution:
             "control_energy": self.control_energy,
             "solve_time_s": float(sum(step.time_s for step in self.homotopy)),
             "homotopy": [
-                {
-                    "eps": s.eps,
-                    "cost": s.cost,
-                    "iterations": s.iterations,
-                    "status": s.status,
-                    "time_s": s.time_s,
-                    "start": s.start,
-                }
+                {"eps": s.eps, "cost": s.cost, "iterations": s.iterations, "status": s.status, "time_s": s.time_s}
                 for s in self.homotopy
             ],
             "baseline": self.baseline,
-            "improvement_percent": None if not base else 100.0 * (base - self.cost) / base,
+            "baseline_feasible": self.baseline_feasible,
+            "baseline_violations": self.problem.coasting_violations(),
+            "improvement_percent": self.improvement_percent,
             "min_sigma_eigenvalue": self.min_sigma_eigenvalue,
             "sigma_positive_definite": self.min_sigma_eigenvalue > 0,
             "problem_hash": self.problem.digest(),
@@ -253,64 +255,10 @@ class Solution:
 
     # ------------------------------------------------------------------ persistence
     def to_dataset(self) -> Any:
-        """Return the solution as an ``xarray.Dataset``."""
-        import xarray as xr
+        """Return the solution as an ``xarray.Dataset`` (see :mod:`mobisense.ocp.solution_dataset`)."""
+        from .solution_dataset import solution_dataset
 
-        data, coords, attrs = self.dataset_parts()
-        return xr.Dataset(data, coords=coords, attrs=attrs)
-
-    def dataset_parts(self) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
-        """(data, coords, attrs) of the dataset: variables ``name -> (dims, values, attrs)``, coordinates."""
-        names = [s.name for s in self.problem.sensors]
-        xy = ["x", "y"]
-        n = self.problem.n
-        data: dict[str, Any] = {
-            "Sigma": (("time", "row", "col"), self.Sigma, {"long_name": "error covariance Σ(t)"}),
-            "p": (("time", "sensor", "xy"), self.p, {"long_name": "sensor position", "units": "L"}),
-            "v": (("time", "sensor", "xy"), self.v, {"long_name": "sensor velocity", "units": "L/T"}),
-            "u": (("time_u", "sensor", "xy"), self.u, {"long_name": "sensor control", "units": "L/T^2"}),
-        }
-        coords: dict[str, Any] = {
-            "time": self.t,
-            "time_u": self.t_u,
-            "sensor": names,
-            "xy": xy,
-            "row": np.arange(n),
-            "col": np.arange(n),
-        }
-        if self.Lam is not None:
-            coords["time_costate"] = self.t_costate
-            data["Lam"] = (("time_costate", "row", "col"), self.Lam, {"long_name": "costate of Σ"})
-            data["lam_p"] = (("time_costate", "sensor", "xy"), self.lam_p, {"long_name": "costate of p"})
-            data["lam_v"] = (("time_costate", "sensor", "xy"), self.lam_v, {"long_name": "costate of v"})
-        if self.path_eps is not None:
-            coords["step"] = np.arange(len(self.path_eps))
-            data["path_eps"] = (("step",), self.path_eps)
-            data["path_p"] = (("step", "time", "sensor", "xy"), self.path_p)
-            data["path_Sigma"] = (("step", "time", "row", "col"), self.path_Sigma)
-        if self.nlp is not None:
-            for key in ("w", "lam_w", "lam_g", "P"):
-                dim = {"w": "nlp_w", "lam_w": "nlp_w", "lam_g": "nlp_g", "P": "nlp_p"}[key]
-                data[f"nlp_{key}"] = ((dim,), np.asarray(self.nlp[key]), {"long_name": f"NLP {key} (warm starts)"})
-        attrs = {
-            "nlp_signature": "" if self.nlp is None else self.nlp["signature"],
-            "problem_yaml": yaml.safe_dump(self.problem.normalised(), sort_keys=False),
-            "solver_options_json": self.problem.solver.model_dump_json(),
-            "summary_json": json.dumps(self.summary()),
-            "homotopy_json": json.dumps(to_jsonable([asdict(s) for s in self.homotopy])),
-            "baseline_json": json.dumps(to_jsonable(self.baseline)),
-            "stats_json": json.dumps(to_jsonable(self.stats)),
-            "method": self.method,
-            "status": self.status.value,
-            "message": self.message,
-            "eps": self.eps,
-            "collocation_json": json.dumps(self.collocation),
-            "terminal_cost": self.terminal_cost,
-            "running_cost": self.running_cost,
-            "control_energy": self.control_energy,
-            "conventions": "Sigma/Lam full symmetric matrices; costates of J (minimisation, H = L + lam'f)",
-        }
-        return data, coords, attrs
+        return solution_dataset(self)
 
     def to_xarray(self) -> Any:
         """The solution as an ``xarray.Dataset`` (what :meth:`save` writes as ``solution.nc``)."""
@@ -372,7 +320,11 @@ class Solution:
 
     def __repr__(self) -> str:
         base = self.baseline.get("cost")
-        change = "" if not base else f" ({100.0 * (self.cost - base) / base:+.1f} %)"
+        improvement = self.improvement_percent
+        if improvement is not None:
+            change = f" (J is {improvement:.1f} % lower)"
+        else:
+            change = " (infeasible: it violates the terminal constraints)"
         lines = [
             f"Solution of {self.problem.name!r} by the {self.method} method: {self.status.value} (ε = {self.eps:g})",
             f"  J = {self.cost:.10g} = terminal {self.terminal_cost:.6g} + running {self.running_cost:.6g}"
@@ -393,62 +345,25 @@ class Solution:
     def save(self, folder: str | Path) -> None:
         """Write ``solution.nc`` and ``summary.json`` into ``folder`` (atomically)."""
         folder = Path(folder)
-        write_netcdf_variables(folder / "solution.nc", *self.dataset_parts())  # no xarray on the solve path
+        write_netcdf(folder / "solution.nc", self.to_dataset())
         write_json(folder / "summary.json", self.summary())
 
     @classmethod
     def from_dataset(cls, ds: Any) -> Solution:
-        """Rebuild a Solution from :meth:`to_dataset` output."""
-        a = ds.attrs
-        problem = Problem.from_dict(yaml.safe_load(a["problem_yaml"]), source="solution.nc:problem_yaml")
-        has_costates = "Lam" in ds
-        has_path = "path_eps" in ds
-        return cls(
-            problem=problem,
-            method=str(a["method"]),
-            status=str(a["status"]),
-            message=str(a["message"]),
-            eps=float(a["eps"]),
-            t=ds["time"].values,
-            Sigma=ds["Sigma"].values,
-            p=ds["p"].values,
-            v=ds["v"].values,
-            t_u=ds["time_u"].values,
-            u=ds["u"].values,
-            terminal_cost=float(a["terminal_cost"]),
-            running_cost=float(a["running_cost"]),
-            control_energy=float(a["control_energy"]),
-            homotopy=[HomotopyStep(**s) for s in json.loads(a["homotopy_json"])],
-            t_costate=ds["time_costate"].values if has_costates else None,
-            Lam=ds["Lam"].values if has_costates else None,
-            lam_p=ds["lam_p"].values if has_costates else None,
-            lam_v=ds["lam_v"].values if has_costates else None,
-            path_eps=ds["path_eps"].values if has_path else None,
-            path_p=ds["path_p"].values if has_path else None,
-            path_Sigma=ds["path_Sigma"].values if has_path else None,
-            baseline=json.loads(a["baseline_json"]),
-            stats=json.loads(a["stats_json"]),
-            collocation=None
-            if a.get("collocation_json") in (None, "null")
-            else tuple(json.loads(a["collocation_json"])),
-            nlp=None
-            if "nlp_w" not in ds
-            else {
-                "w": ds["nlp_w"].values,
-                "lam_w": ds["nlp_lam_w"].values,
-                "lam_g": ds["nlp_lam_g"].values,
-                "P": ds["nlp_P"].values,
-                "signature": str(a["nlp_signature"]),
-            },
-        )
+        """Rebuild a Solution from :meth:`to_dataset` output (or a ``solution.nc`` read back)."""
+        from .solution_dataset import solution_fields
+
+        fields = solution_fields(ds)
+        fields["problem"] = Problem.from_dict(fields["problem"], source="solution.nc:problem_yaml")
+        fields["homotopy"] = [HomotopyStep(**step) for step in fields["homotopy"]]
+        return cls(**fields)
 
     @classmethod
     def load(cls, path: str | Path) -> Solution:
         """Load ``solution.nc`` (or a folder containing it)."""
-        import xarray as xr
+        from ..core.netcdf import open_dataset
 
         path = Path(path)
         if path.is_dir():
             path = path / "solution.nc"
-        with xr.open_dataset(path, engine="h5netcdf") as ds:
-            return cls.from_dataset(ds.load())
+        return cls.from_dataset(open_dataset(path))

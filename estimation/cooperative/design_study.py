@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import model_validator
+from pydantic import Field, model_validator
 
 from ...core.config import InvalidValue, PositiveFloat, StrictModel, Vector2, load_config
 from .noise_config import NoiseConfig
@@ -46,6 +46,7 @@ class ShapeBounds(StrictModel):
 class FormationFile(StrictModel):
     """A formation-design file read by ``mobisense steady-state``."""
 
+    kind: Literal["formation"] | None = Field(None, description="file kind (optional with 'bounds' or 'positions')")
     formation: Literal["cross", "custom"] = "cross"
     noise: NoiseConfig
     bounds: ShapeBounds | None = None
@@ -189,11 +190,15 @@ def _trace_grid(config: FormationFile) -> object:
     b = np.linspace(b_min, b_max, config.contour_resolution)
     n = config.noise
     values = cross_trace(a[:, None], b[None, :], n.sigma_process, n.sigma_measurement, n.sigma_hessian)
-    ds = xr.Dataset({"trace": (("a", "b"), values)}, coords={"a": a, "b": b})
-    ds["trace"].attrs["long_name"] = (
-        "tr P_inf(+) of the cross formation (docs/theory/steady_state.md, eq. steady_state.5)"
-    )
-    ds["a"].attrs["units"] = ds["b"].attrs["units"] = "length unit of the field"
+    ds = xr.Dataset(
+        {"trace": (("a", "b"), values, {"long_name": "trace of the steady-state error covariance P_inf(+) "
+                                                     "of the cross formation", "units": "1"})},
+        coords={"a": ("a", a, {"long_name": "half distance of platforms 1 and 2", "units": "1"}),
+                "b": ("b", b, {"long_name": "half distance of platforms 3 and 4", "units": "1"})},
+        attrs={"title": "mobisense: steady-state covariance of the cross formation over its shape (a, b)",
+               "comment": "docs/theory/steady_state.md, eq. steady_state.5; lengths in the units of the noise "
+                          "model (the formation file declares none), the trace in field units squared"},
+    )  # fmt: skip
     return ds
 
 

@@ -36,7 +36,9 @@ Example
 from __future__ import annotations
 
 import functools
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Literal, Protocol
 
 import numpy as np
@@ -316,12 +318,28 @@ def _rollout_body() -> Any:
         Ps.append(Pk)
     inputs, outputs = [x, P, dr, u, J, j, M], [xk, Pk, ca.horzcat(*xs), ca.horzcat(*Ps)]
     if shutil.which("gcc") or shutil.which("cc"):
-        options = {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O2"], "verbose": False}}
+        jit_options = {"flags": ["-O2"], "verbose": False, "directory": _jit_directory()}
+        options = {"jit": True, "compiler": "shell", "jit_options": jit_options}
         try:
             return ca.Function("cooperative_steps", inputs, outputs, options)
         except RuntimeError:  # compiler present but unusable: fall back to the virtual machine
             pass
     return ca.Function("cooperative_steps", inputs, outputs)
+
+
+@functools.lru_cache(maxsize=1)
+def _jit_directory() -> str:
+    """The user's private folder for CasADi's JIT sources and objects (never the working directory).
+
+    CasADi deletes its files when the compiled function is released; only a killed process leaves some,
+    in the system's temporary folder rather than in the user's project.
+    """
+    import getpass
+    import tempfile
+
+    folder = Path(tempfile.gettempdir()) / f"mobisense-jit-{getpass.getuser()}"
+    folder.mkdir(mode=0o700, exist_ok=True)
+    return str(folder) + os.sep
 
 
 @functools.lru_cache(maxsize=16)

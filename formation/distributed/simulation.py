@@ -115,6 +115,7 @@ class OutputSpec(StrictModel):
 class DistributedScenario(StrictModel):
     """A ``mobisense simulate distributed`` scenario file."""
 
+    kind: Literal["distributed"] | None = Field(None, description="file kind (optional: 'network' tells it)")
     name: str = "distributed"
     seed: int = 0
     time: TimeGrid = TimeGrid()
@@ -258,10 +259,17 @@ def simulate(scenario: DistributedScenario, seed: int | None = None, progress: b
             "runtime_s": runtime,
         },
     )
-    ds["time"].attrs["units"] = "s"
+    ds.attrs["title"] = f"mobisense: distributed-filter simulation '{scenario.name}'"
     for name, description in _DESCRIPTIONS.items():
-        ds[name].attrs["long_name"] = description
+        ds[name].attrs.update(long_name=description, units=_UNITS.get(name, "1"))
     return ds
+
+
+#: units of the variables and coordinates (lengths in m, time in s, the field's values dimensionless)
+_UNITS = {
+    "time": "s", "gradient_true": "m-1", "gradient_unconstrained": "m-1", "gradient_constrained": "m-1",
+    "centre": "m", "sensor_position": "m", "distance": "m", "desired_distance": "m",
+}  # fmt: skip
 
 
 _DESCRIPTIONS = {
@@ -279,6 +287,9 @@ _DESCRIPTIONS = {
     "desired_distance": "desired distance of the link (Zhang et al. (2023), eq. 39, times its shape ratio)",
     "link_sensors": "the two sensors of each intra-cell link",
     "cell_sensors": "sensors at the cell's vertices, counter-clockwise, -1 padded",
+    "time": "time of the samples",
+    "cell": "cell number",
+    "sensor": "sensor number",
 }
 
 
@@ -406,21 +417,27 @@ class DistributedResult(SimulationResult):
         folder = Path(folder)
         field = self.scenario.field.build()
         write_figure(folder / "paths.png", lambda: plot_paths(self.dataset, field))
-        write_figure(folder / "estimates.png", lambda: plot_estimates(self.dataset, self.scenario.output.plot_cells))
+        cells = self.scenario.output.plot_cells
+        write_figure(folder / "estimates.png", lambda: plot_estimates(self.dataset, cells, "dimensionless"))
         return [folder / "paths.png", folder / "estimates.png"]
 
     def report(self, folder: Path) -> None:
         """The per-cell error table (the paper's Table 1) and where the files went."""
         s = self.summary
         print(f"{s['scenario']}: {s['steps']} steps, noise σ = {s['noise_std']:.4g}, seed {s['seed']}")
-        print(f"{'cell':>4} {'mean_n':>9} {'mean_u':>9} {'mean_c':>9} {'std_n':>8} {'std_u':>8} {'std_c':>8}")
+        print("errors of the field value at each cell centre (estimate − truth): mean and standard deviation of")
+        print("  the cell's averaged measurements, the unconstrained filter and the PDE-constrained filter")
+        print(f"{'cell':>4} {'mean:':>6}{'meas.':>7} {'uncons.':>9} {'constr.':>9}  {'std:':>5}{'meas.':>6} "
+              f"{'uncons.':>8} {'constr.':>8}")  # fmt: skip
+
         def number(x: float, width: int) -> str:  # fixed point, or exponent for a diverged estimate
             return f"{x:>{width}.4f}" if abs(x) < 1e4 else f"{x:>{width}.2e}"
 
         for row in s["error_table"]:
-            keys = ("mean_noise", "mean_unconstrained", "mean_constrained")
-            means = " ".join(number(row[k], 9) for k in keys)
-            stds = " ".join(number(row[k], 8) for k in ("std_noise", "std_unconstrained", "std_constrained"))
+            means = " ".join(number(row[k], w) for k, w in (("mean_noise", 13), ("mean_unconstrained", 9),
+                                                              ("mean_constrained", 9)))  # fmt: skip
+            stds = " ".join(number(row[k], w) for k, w in (("std_noise", 12), ("std_unconstrained", 8),
+                                                             ("std_constrained", 8)))  # fmt: skip
             print(f"{row['cell']:>4} {means} {stds}")
         worst = max(row["std_constrained"] for row in s["error_table"])
         if not worst < 1e3 * max(row["std_noise"] for row in s["error_table"]):

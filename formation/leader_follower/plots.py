@@ -30,20 +30,31 @@ __all__ = [
 _RUN_STYLES = ("-", "--", ":", "-.")
 
 
+def _width(r: int, runs: int) -> float:
+    """Line width of run ``r``: earlier runs wider, so runs whose curves coincide stay visible as layers."""
+    return 1.0 + 1.5 * (runs - 1 - r)
+
+
 def _lines(result: xr.Dataset):
-    """(run, follower, label, colour, linestyle) for every run × follower curve."""
+    """``(run, follower, label, style)`` for every run × follower curve; ``style`` holds colour, ls, lw."""
     import matplotlib.pyplot as plt
 
     colours = plt.get_cmap("tab10")
     many_followers = result.sizes["follower"] > 1
+    runs = result.sizes["run"]
     for r, run in enumerate(result["run"].values):
         control = str(result["control"].sel(run=run).values)
         for f, follower in enumerate(result["follower"].values):
             label = (str(run) if str(run) == control else f"{run} ({control})") + (
-                f", R{int(follower)}" if many_followers else ""
+                f", follower {int(follower)}" if many_followers else ""
             )
-            colour = colours(f if many_followers else r)
-            yield run, follower, label, colour, _RUN_STYLES[r % len(_RUN_STYLES)] if many_followers else "-"
+            style = {
+                "color": colours(f if many_followers else r),
+                "ls": _RUN_STYLES[r % len(_RUN_STYLES)] if many_followers else "-",
+                "lw": _width(r, runs),
+                "alpha": 0.85,
+            }
+            yield run, follower, label, style
 
 
 def _wrapped(values: xr.DataArray) -> xr.DataArray:
@@ -63,13 +74,13 @@ def plot_paths(result: xr.Dataset):  # noqa: ANN201  (matplotlib Figure)
             x, y = r["x"].sel(agent=a).values, r["y"].sel(agent=a).values
             leader = a == r["agent"].values[0]
             style = dict(color="k", lw=1.8) if leader else dict(color=colours(int(a) - 2), lw=1.3, ls="--")
-            ax.plot(x, y, label="R1 (leader)" if leader else f"R{int(a)}", **style)
+            ax.plot(x, y, label="leader (agent 1)" if leader else f"follower (agent {int(a)})", **style)
             ax.plot(x[0], y[0], "o", color=style["color"], ms=5)
             ax.plot(x[-1], y[-1], "^", color=style["color"], ms=6)
         ax.set_aspect("equal", adjustable="datalim")
-        ax.set_xlabel("x [m]")
-        ax.set_ylabel("y [m]")
-        ax.set_title(f"{run}: {str(r['control'].values)}, {str(r['reference_kind'].values)} reference")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.set_title(f"{run}: {str(r['control'].values)}, {str(r['reference_kind'].values)} formation parameters")
         ax.grid(alpha=0.3)
     axes[0, 0].legend(loc="best", fontsize=8)
     fig.suptitle(f"{result.attrs.get('scenario', '')}: paths (○ start, ▲ end)")
@@ -83,13 +94,13 @@ def plot_formation_errors(result: xr.Dataset):  # noqa: ANN201
 
     fig, (ax_d, ax_b) = plt.subplots(2, 1, figsize=(8, 6.4), sharex=True)
     t = result["time"].values
-    for run, follower, label, colour, ls in _lines(result):
+    for run, follower, label, style in _lines(result):
         s = result.sel(run=run, follower=follower)
-        ax_d.plot(t, s["d"] - s["d0"], color=colour, ls=ls, label=label)
-        ax_b.plot(t, _wrapped(s["beta"] - s["beta0"]), color=colour, ls=ls, label=label)
-    ax_d.set_ylabel("d − d0 [m]")
-    ax_b.set_ylabel("β − β0 [rad]")
-    ax_b.set_xlabel("t [s]")
+        ax_d.plot(t, s["d"] - s["d0"], label=label, **style)
+        ax_b.plot(t, _wrapped(s["beta"] - s["beta0"]), label=label, **style)
+    ax_d.set_ylabel("distance error d − d0 (m)")
+    ax_b.set_ylabel("bearing error β − β0 (rad)")
+    ax_b.set_xlabel("time (s)")
     for ax in (ax_d, ax_b):
         ax.axhline(0.0, color="0.5", lw=0.8)
         ax.grid(alpha=0.3)
@@ -106,24 +117,25 @@ def plot_reference_point_errors(result: xr.Dataset):  # noqa: ANN201
     fig, (ax_x, ax_y, ax_n) = plt.subplots(3, 1, figsize=(8, 8.4), sharex=True)
     t = result["time"].values
     gain = float(result.attrs.get("gain", 1.0))
-    for run, follower, label, colour, ls in _lines(result):
+    for run, follower, label, style in _lines(result):
         s = result.sel(run=run, follower=follower)
         norm = np.hypot(s["xe"].values, s["ye"].values)
-        ax_x.plot(t, s["xe"], color=colour, ls=ls, label=label)
-        ax_y.plot(t, s["ye"], color=colour, ls=ls, label=label)
-        ax_n.semilogy(t, norm, color=colour, ls=ls, label=label)
+        ax_x.plot(t, s["xe"], label=label, **style)
+        ax_y.plot(t, s["ye"], label=label, **style)
+        ax_n.semilogy(t, norm, label=label, **style)
     first = result.isel(run=0, follower=0)
     e0 = float(np.hypot(first["xe"].values[0], first["ye"].values[0]))
-    ax_n.semilogy(t, e0 * np.exp(-gain * t), "k:", lw=1.2, label=f"‖e(0)‖ exp(−kt), k = {gain:g} 1/s")
-    ax_x.set_ylabel("x_e [m]")
-    ax_y.set_ylabel("y_e [m]")
-    ax_n.set_ylabel("‖(x_e, y_e)‖ [m]")
-    ax_n.set_xlabel("t [s]")
+    if e0 > 0:  # the exact decay of Control 1 with exact sensing, for comparison
+        ax_n.semilogy(t, e0 * np.exp(-gain * t), "k:", lw=1.2, label=f"‖e(0)‖ exp(−kt), k = {gain:g} 1/s")
+    ax_x.set_ylabel("along the heading, x_e (m)")
+    ax_y.set_ylabel("across the heading, y_e (m)")
+    ax_n.set_ylabel("distance ‖(x_e, y_e)‖ (m)")
+    ax_n.set_xlabel("time (s)")
     for ax in (ax_x, ax_y, ax_n):
         ax.grid(alpha=0.3)
     ax_x.legend(fontsize=8)
     ax_n.legend(fontsize=8)
-    ax_x.set_title(f"{result.attrs.get('scenario', '')}: reference-point errors (eq. 10)")
+    ax_x.set_title(f"{result.attrs.get('scenario', '')}: error of the follower's reference point")
     fig.tight_layout()
     return fig
 
@@ -134,12 +146,12 @@ def plot_deviation(result: xr.Dataset):  # noqa: ANN201
 
     fig, ax = plt.subplots(figsize=(8, 4.2))
     t = result["time"].values
-    for run, follower, label, colour, ls in _lines(result):
-        ax.plot(t, result["deviation"].sel(run=run, follower=follower), color=colour, ls=ls, label=label)
+    for run, follower, label, style in _lines(result):
+        ax.plot(t, result["deviation"].sel(run=run, follower=follower), label=label, **style)
     ax.set_yscale("log")
-    ax.set_xlabel("t [s]")
-    ax.set_ylabel("deviation from predecessor's path [m]")
-    ax.set_title(f"{result.attrs.get('scenario', '')}: path deviation (eq. 54)")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("distance from the predecessor's path (m)")
+    ax.set_title(f"{result.attrs.get('scenario', '')}: how far each follower strays from its predecessor's path")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8, ncol=2)
     fig.tight_layout()
@@ -152,13 +164,13 @@ def plot_references(result: xr.Dataset):  # noqa: ANN201
 
     fig, (ax_d, ax_b) = plt.subplots(2, 1, figsize=(8, 5.6), sharex=True)
     t = result["time"].values
-    for run, follower, label, colour, ls in _lines(result):
+    for run, follower, label, style in _lines(result):
         s = result.sel(run=run, follower=follower)
-        ax_d.plot(t, s["d0"], color=colour, ls=ls, label=label)
-        ax_b.plot(t, s["beta0"], color=colour, ls=ls, label=label)
-    ax_d.set_ylabel("d0 [m]")
-    ax_b.set_ylabel("β0 [rad]")
-    ax_b.set_xlabel("t [s]")
+        ax_d.plot(t, s["d0"], label=label, **style)
+        ax_b.plot(t, s["beta0"], label=label, **style)
+    ax_d.set_ylabel("desired distance d0 (m)")
+    ax_b.set_ylabel("desired bearing β0 (rad)")
+    ax_b.set_xlabel("time (s)")
     for ax in (ax_d, ax_b):
         ax.grid(alpha=0.3)
     ax_d.legend(fontsize=8, ncol=2)
@@ -186,14 +198,15 @@ def plot_active_pairs(result: xr.Dataset):  # noqa: ANN201
         ax.pcolormesh(t, pairs, s["active"].values.T, cmap=ListedColormap(["white", "tab:green"]), shading="nearest")
         chosen = s["selected_pair"].values
         ax.plot(t[chosen > 0], chosen[chosen > 0], "k.", ms=1.5, label="merged sub-filter")
-        ax.set_yticks(pairs, [f"p{p}" for p in pairs], fontsize=7)
-        ax.set_ylabel(f"{run}\nR{int(f)}", fontsize=8)
+        ax.set_yticks(pairs, [f"pair {p}" for p in pairs], fontsize=7)
+        ax.set_ylabel(f"{run}\nfollower {int(f)}", fontsize=8)
     axes[0, 0].set_title("active sensor pairs (green) and the sub-filter picked by the merge (dots)")
     err_ax = axes[-1, 0]
-    for run, f in rows:
-        err_ax.semilogy(t, result["position_error"].sel(run=run, follower=f), lw=0.9, label=f"{run}, R{int(f)}")
-    err_ax.set_ylabel("‖p̂ − p‖ [m]")
-    err_ax.set_xlabel("t [s]")
+    for k, (run, f) in enumerate(rows):
+        err_ax.semilogy(t, result["position_error"].sel(run=run, follower=f), lw=_width(k, len(rows)), alpha=0.85,
+                        label=f"{run}, follower {int(f)}")  # fmt: skip
+    err_ax.set_ylabel("error ‖p̂ − p‖ (m)")
+    err_ax.set_xlabel("time (s)")
     err_ax.grid(alpha=0.3, which="both")
     err_ax.legend(fontsize=7, ncol=2)
     err_ax.set_title("predecessor position estimation error")

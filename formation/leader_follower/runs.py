@@ -144,11 +144,16 @@ def simulate_scenario(scenario: LeaderFollowerScenario, seed: int | None = None)
     results = [r.reindex(pair=np.arange(1, n_pairs + 1), fill_value={"active": 0}) for r in results]
     runs = scenario.resolved_runs()
     out = xr.concat(results, dim="run", data_vars="all", coords="minimal", compat="override", join="outer")
-    out = out.assign_coords(run=[name for name, *_ in runs])
-    out["control"] = ("run", [control for _, control, _, _ in runs])
-    out["reference_kind"] = ("run", [reference.kind for _, _, reference, _ in runs])
-    out["sensing_mode"] = ("run", [sensing.mode for _, _, _, sensing in runs])
-    out.attrs.update(scenario=scenario.name, gain=scenario.gain, seed=scenario.seed if seed is None else seed)
+    out = out.assign_coords(run=("run", [name for name, *_ in runs], {"long_name": "run name"}))
+    out["control"] = ("run", [control for _, control, _, _ in runs], {"long_name": "control law of the run"})
+    out["reference_kind"] = ("run", [reference.kind for _, _, reference, _ in runs],
+                             {"long_name": "kind of formation parameters (constant, ramp or path)"})  # fmt: skip
+    out["sensing_mode"] = ("run", [sensing.mode for _, _, _, sensing in runs],
+                           {"long_name": "sensing: exact relative states or the range-sensor ring"})  # fmt: skip
+    out.attrs.update(
+        title=f"mobisense: leader-follower simulation '{scenario.name}'",
+        scenario=scenario.name, gain=scenario.gain, seed=scenario.seed if seed is None else seed,
+    )  # fmt: skip
     return out
 
 
@@ -229,13 +234,15 @@ class LeaderFollowerResult(SimulationResult):
         print(f"{s['scenario']}: {s['followers']} follower(s), {s['wall_time_s']:.2f} s wall time")
         for run, entry in s["runs"].items():
             for follower, m in entry["followers"].items():
+                monotone = "monotone" if m["bearing_error_monotone"] else "not monotone"
                 line = (
-                    f"  {run:>12} R{follower}: |xe|,|ye|(T) = {m['final_abs_xe']:.2e}, {m['final_abs_ye']:.2e} m; "
-                    f"max|β−β0| = {m['max_abs_bearing_error']:.3f} rad (monotone: {m['bearing_error_monotone']}); "
-                    f"mean dev = {m['mean_deviation']:.3g} m"
+                    f"  {run:>12}, follower {follower}: final reference-point error |x_e|, |y_e| = "
+                    f"{m['final_abs_xe']:.2e}, {m['final_abs_ye']:.2e} m; largest bearing error |β − β0| "
+                    f"{m['max_abs_bearing_error']:.3f} rad ({monotone}); mean distance from the predecessor's path "
+                    f"{m['mean_deviation']:.3g} m"
                 )
                 if "rms_position_error" in m and m["rms_position_error"] is not None:
-                    line += f"; RMS estimate error = {m['rms_position_error']:.3g} m"
+                    line += f"; RMS error of the predecessor's estimated position {m['rms_position_error']:.3g} m"
                 print(line)
         super().report(folder)
 

@@ -231,6 +231,7 @@ class RunConfig(StrictModel):
 class LeaderFollowerScenario(StrictModel):
     """A leader–follower simulation scenario (see the module docstring)."""
 
+    kind: Literal["leader_follower"] | None = Field(None, description="file kind (optional: 'leader' tells it)")
     name: str
     description: str = ""
     duration: PositiveFloat

@@ -308,22 +308,23 @@ def _dataset(problem: LeaderFollowerProblem, times: np.ndarray, rec: dict) -> xr
         return ft, values.T
 
     data = {
-        "x": (("agent", "time"), poses[:, :, 0].T, {"units": "m"}),
-        "y": (("agent", "time"), poses[:, :, 1].T, {"units": "m"}),
+        "x": (("agent", "time"), poses[:, :, 0].T, {"units": "m", "long_name": "agent position, x"}),
+        "y": (("agent", "time"), poses[:, :, 1].T, {"units": "m", "long_name": "agent position, y"}),
         "phi": (("agent", "time"), poses[:, :, 2].T, {"units": "rad", "long_name": "heading"}),
-        "v": (("agent", "time"), rec["v"].T, {"units": "m/s", "long_name": "forward speed input"}),
-        "omega": (("agent", "time"), rec["omega"].T, {"units": "rad/s", "long_name": "turn-rate input"}),
+        "v": (("agent", "time"), rec["v"].T, {"units": "m s-1", "long_name": "forward speed input"}),
+        "omega": (("agent", "time"), rec["omega"].T, {"units": "rad s-1", "long_name": "turn-rate input"}),
         "d": (*per_follower(d), {"units": "m", "long_name": "distance to predecessor"}),
         "beta": (*per_follower(beta), {"units": "rad", "long_name": "bearing of predecessor"}),
         "gamma": (*per_follower(gamma), {"units": "rad", "long_name": "heading difference phi_i - phi_{i-1}"}),
         "d0": (*per_follower(rec["d0"]), {"units": "m", "long_name": "reference distance"}),
         "beta0": (*per_follower(rec["beta0"]), {"units": "rad", "long_name": "reference bearing"}),
-        "xe": (*per_follower(xe), {"units": "m", "long_name": "reference-point error, x (eq. 10)"}),
-        "ye": (*per_follower(ye), {"units": "m", "long_name": "reference-point error, y (eq. 10)"}),
+        "xe": (*per_follower(xe), {"units": "m", "long_name": "reference-point error, along the heading"}),
+        "ye": (*per_follower(ye), {"units": "m", "long_name": "reference-point error, across the heading"}),
         "deviation": (*per_follower(deviation), {"units": "m", "long_name": "deviation from path of predecessor"}),
         "d_est": (*per_follower(rec["d_est"]), {"units": "m", "long_name": "distance used by the control"}),
         "beta_est": (*per_follower(wrap), {"units": "rad", "long_name": "bearing used by the control"}),
-        "speed_est": (*per_follower(np.hypot(est[..., 2], est[..., 3])), {"units": "m/s"}),
+        "speed_est": (*per_follower(np.hypot(est[..., 2], est[..., 3])),
+                      {"units": "m s-1", "long_name": "estimated predecessor speed"}),
         "target_x_est": (*per_follower(est[..., 0]), {"units": "m", "long_name": "estimated predecessor x"}),
         "target_y_est": (*per_follower(est[..., 1]), {"units": "m", "long_name": "estimated predecessor y"}),
         "position_error": (
@@ -333,14 +334,17 @@ def _dataset(problem: LeaderFollowerProblem, times: np.ndarray, rec: dict) -> xr
         "active": (
             ("follower", "time", "pair"),
             np.moveaxis(rec["active"], 0, 1),
-            {"long_name": "sensor pair active (Definition 1)"},
+            {"long_name": "sensor pair active: both sensors read and a triangle exists (1) or not (0)",
+             "units": "1"},
         ),
-        "selected_pair": (*per_follower(rec["selected"]), {"long_name": "merged sub-filter (1-based; 0 none)"}),
+        "selected_pair": (*per_follower(rec["selected"]),
+                          {"long_name": "sensor pair of the merged sub-filter (1-based; 0: none)", "units": "1"}),
     }
     coords = {
-        "time": ("time", times, {"units": "s"}),
-        "agent": agent,
-        "follower": agent[1:],
-        "pair": np.arange(1, rec["active"].shape[2] + 1),
+        "time": ("time", times, {"units": "s", "long_name": "time"}),
+        "agent": ("agent", agent, {"units": "1", "long_name": "agent number (1: the leader)"}),
+        "follower": ("follower", agent[1:], {"units": "1", "long_name": "agent number of the follower"}),
+        "pair": ("pair", np.arange(1, rec["active"].shape[2] + 1),
+                 {"units": "1", "long_name": "sensor pair number"}),
     }
     return xr.Dataset(data, coords=coords)

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from pydantic import Field
@@ -72,6 +72,7 @@ class MonteCarloOptions(StrictModel):
 class OcpReplayScenario(StrictModel):
     """A replay of a ``mobisense solve`` solution (paths relative to the scenario file)."""
 
+    kind: Literal["plan_replay"] | None = Field(None, description="file kind (optional: 'solution' tells it)")
     name: str = Field(pattern=r"^[A-Za-z0-9_.\-]+$")
     solution: str = Field(description="solution.nc written by mobisense solve")
     problem: str | None = Field(
@@ -327,23 +328,36 @@ def replay_solution(
     promised, delivered = float(np.trace(M @ result.predicted[-1])), float(np.trace(M @ result.empirical[-1]))
     names = [s.name for s in problem.sensors]
     pos, cov = ("time", "sensor", "xy"), ("time", "row", "col")
+    us = problem.units.system()
+    L, LT, X2 = us.of(length=1), us.of(length=1, time=-1), us.of(state=2)
     ds = xr.Dataset(
         {
-            "r": (pos, r, {"long_name": "flown sensor position", "units": "L"}),
-            "v": (pos, v, {"long_name": "flown sensor velocity", "units": "L/T"}),
-            "r_ref": (pos, p_ref, {"long_name": "optimised sensor position", "units": "L"}),
-            "v_ref": (pos, v_ref, {"long_name": "optimised sensor velocity", "units": "L/T"}),
-            "tracking_error": (("time", "sensor"), error, {"long_name": "|r - r_ref|", "units": "L"}),
-            "Sigma_predicted": (cov, result.predicted, {"long_name": "optimiser's error covariance"}),
-            "P_filter": (cov, result.filter_covariance, {"long_name": "sampled filter covariance P(+)"}),
-            "covariance_empirical": (cov, result.empirical, {"long_name": "Monte Carlo error covariance"}),
-            "nees_predicted": ("time", result.nees_predicted, {"long_name": "average NEES against Sigma(t)"}),
-            "nees_filter": ("time", result.nees_filter, {"long_name": "average NEES against P_k"}),
+            "r": (pos, r, {"long_name": "flown sensor position", "units": L}),
+            "v": (pos, v, {"long_name": "flown sensor velocity", "units": LT}),
+            "r_ref": (pos, p_ref, {"long_name": "optimised (planned) sensor position", "units": L}),
+            "v_ref": (pos, v_ref, {"long_name": "optimised (planned) sensor velocity", "units": LT}),
+            "tracking_error": (("time", "sensor"), error,
+                               {"long_name": "distance of the flown from the planned position", "units": L}),
+            "Sigma_predicted": (cov, result.predicted,
+                                {"long_name": "error covariance promised by the optimiser, Σ(t)", "units": X2}),
+            "P_filter": (cov, result.filter_covariance,
+                         {"long_name": "covariance P(+) of the sampled Kalman filter", "units": X2}),
+            "covariance_empirical": (cov, result.empirical,
+                                     {"long_name": "Monte Carlo error covariance E[e e']", "units": X2}),
+            "nees_predicted": ("time", result.nees_predicted,
+                               {"long_name": "NEES against Σ(t), averaged over the runs", "units": "1"}),
+            "nees_filter": ("time", result.nees_filter,
+                            {"long_name": "NEES against the filter's P, averaged over the runs", "units": "1"}),
         },
-        coords={"time": times, "sensor": names, "xy": ["x", "y"], "row": np.arange(problem.n),
-                "col": np.arange(problem.n)},
-        attrs={"band_low": result.band[0], "band_high": result.band[1], "runs": mc.runs,
-               "confidence": mc.confidence, "time_step": float(times[1] - times[0]), "problem": problem.name},
+        coords={"time": ("time", times, {"long_name": "time of the filter samples", "units": us.of(time=1)}),
+                "sensor": ("sensor", names, {"long_name": "sensor name"}),
+                "xy": ("xy", ["x", "y"], {"long_name": "planar component"}),
+                "row": ("row", np.arange(problem.n), {"long_name": "row index (process state)", "units": "1"}),
+                "col": ("col", np.arange(problem.n), {"long_name": "column index (process state)", "units": "1"})},
+        attrs={"title": f"mobisense: plan replay of problem '{problem.name}'",
+               "band_low": result.band[0], "band_high": result.band[1], "runs": mc.runs,
+               "confidence": mc.confidence, "time_step": float(times[1] - times[0]), "problem": problem.name,
+               "length_unit": problem.units.length, "time_unit": problem.units.time},
     )  # fmt: skip
     relative = np.abs(
         np.trace(result.filter_covariance, axis1=1, axis2=2) / np.trace(result.predicted, axis1=1, axis2=2)

@@ -1,8 +1,9 @@
 """Optimised sensor trajectories as references to track (the OCP → control link, docs/theory/replay.md §1.1).
 
-* :func:`load_or_solve` — a ``solution.nc`` written by ``mobisense solve``, or, when the file does not
-  exist yet, the solution of the problem it came from, solved here by :func:`mobisense.ocp.direct.solver.solve_direct`
-  (so shipped scenarios run on a fresh clone);
+* :func:`load_checked` / :func:`load_or_solve` — a ``solution.nc`` written by ``mobisense solve`` if its
+  problem hash matches the problem file's, or else (missing, unreadable, stale) the solution of that
+  problem, solved here by :func:`mobisense.ocp.direct.solver.solve_direct` (so shipped scenarios run on a
+  fresh clone and never replay a plan of another problem);
 * :class:`ReferenceTrajectory` — positions and velocities of the solution as a C¹ cubic Hermite
   spline through its state grid (``p`` with slopes ``v``: exact at every collocation point), and the
   optimiser's own control ``u`` (linear between its collocation nodes) as the feed-forward;
@@ -22,42 +23,94 @@ import numpy as np
 from ..shape_control import FixedShapeController
 
 if TYPE_CHECKING:
+    from ...ocp.problem import Problem
     from ...ocp.solution import Solution
 
-__all__ = ["load_or_solve", "ReferenceTrajectory", "TrackingController"]
+__all__ = ["load_checked", "load_or_solve", "reference_status", "ReferenceTrajectory", "TrackingController"]
 
 
-def load_or_solve(solution_path: Path, problem_path: Path | None) -> tuple[Solution, str]:
-    """Load ``solution_path``; if it does not exist, solve ``problem_path`` by direct collocation.
+def _read_solution(path: Path) -> tuple[Solution | None, str]:
+    """The solution in ``path`` (None and why if it cannot be used)."""
+    from ...ocp.solution import Solution
+
+    try:
+        solution = Solution.load(path)
+    except Exception as err:  # noqa: BLE001  (any failure to read means: not a usable solution file)
+        return None, f"{path} is not a solution file written by mobisense solve ({type(err).__name__}: {err})"
+    if not solution.success:
+        return None, f"{path} holds a failed solve ({solution.message})"
+    return solution, ""
+
+
+def _check(solution_path: Path, problem_path: Path | None) -> tuple[Solution | None, Problem | None, str]:
+    """Solution (or None: solve first), the problem (if given) and what was found (see :func:`load_checked`)."""
+    from ...core.config import ConfigError
+    from ...ocp.problem import load_problem
+
+    problem = None if problem_path is None else load_problem(problem_path)  # ConfigError (one line) if invalid
+    if not solution_path.is_file():
+        if problem is None:
+            raise ConfigError(f"{solution_path}: file not found (give 'problem:' to solve it first)")
+        return None, problem, f"{solution_path} not found"
+    solution, why = _read_solution(solution_path)
+    if solution is None:
+        if problem is None:
+            raise ConfigError(f"{why}; give 'problem:' to solve it instead")
+        return None, problem, why
+    if problem is None:
+        return solution, None, f"loaded {solution_path} (not checked against a problem file: give 'problem:')"
+    stored, current = solution.problem.digest(), problem.digest()
+    if stored != current:
+        return None, problem, (
+            f"{solution_path} is stale: it solves problem hash {stored}, {problem_path} has hash {current}"
+        )
+    return solution, problem, f"loaded {solution_path} (problem hash {current} matches {problem_path})"
+
+
+def reference_status(solution_path: Path, problem_path: Path | None) -> str:
+    """What :func:`load_checked` would do, without solving (for ``mobisense validate``)."""
+    solution, _, note = _check(solution_path, problem_path)
+    return note if solution is not None else f"{note}: the replay solves {problem_path} first"
+
+
+def load_checked(solution_path: Path, problem_path: Path | None) -> tuple[Solution, str, bool]:
+    """The solution of ``solution_path`` if it is up to date with ``problem_path``, else ``problem_path`` solved.
+
+    The solution's problem hash (:meth:`~mobisense.ocp.problem.Problem.digest`, which covers the solver
+    options) must equal the problem file's; a missing, unreadable, failed or stale solution is replaced by
+    the direct-collocation solution of the problem.
 
     Returns
     -------
     solution : Solution
     note : str
         What happened (printed by the command and stored in ``summary.json``).
+    solved : bool
+        Whether the problem was solved here (the caller writes the new ``solution.nc``).
 
     Raises
     ------
     ConfigError
-        Neither the solution nor a problem to solve exists, or the problem file is invalid.
+        The solution cannot be used and there is no problem to solve, or the problem file is invalid.
     RuntimeError
         The solver did not reach ε = 1.
     """
-    from ...core.config import ConfigError
-    from ...ocp.solution import Solution
-
-    if solution_path.is_file():
-        return Solution.load(solution_path), f"loaded {solution_path}"
-    if problem_path is None:
-        raise ConfigError(f"{solution_path}: file not found (give 'problem:' to solve it first)")
     from ...ocp.direct.solver import solve_direct
-    from ...ocp.problem import load_problem
 
-    problem = load_problem(problem_path)  # ConfigError (one line) if invalid
+    solution, problem, note = _check(solution_path, problem_path)
+    if solution is not None:
+        return solution, note, False
+    assert problem is not None  # _check raises when there is neither
     solution = solve_direct(problem)
     if not solution.success:
         raise RuntimeError(f"solving {problem_path} failed: {solution.message}")
-    return solution, f"{solution_path} not found: solved {problem_path} by direct collocation first"
+    return solution, f"{note}: solved {problem_path} by direct collocation", True
+
+
+def load_or_solve(solution_path: Path, problem_path: Path | None) -> tuple[Solution, str]:
+    """:func:`load_checked` without the flag: the solution and what happened."""
+    solution, note, _ = load_checked(solution_path, problem_path)
+    return solution, note
 
 
 class ReferenceTrajectory:

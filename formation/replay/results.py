@@ -19,11 +19,12 @@ from typing import Any
 
 import numpy as np
 
+from ...core.units import UnitSystem
 from ..level_curve import heading_error
 from ..shape_control import shape_error
 from .simulation import CenterLevelCurve, ReplayRecord, ReplaySystem
 
-__all__ = ["replay_dataset", "replay_summary", "mean_abs_curvature"]
+__all__ = ["replay_dataset", "replay_summary", "mean_abs_curvature", "units_of"]
 
 
 def replay_dataset(record: ReplayRecord, system: ReplaySystem, seed: int) -> Any:
@@ -42,25 +43,31 @@ def replay_dataset(record: ReplayRecord, system: ReplaySystem, seed: int) -> Any
         0.5 * np.linalg.norm(A["r"][:, 2] - A["r"][:, 3], axis=-1) if N >= 4 else np.full(len(half), np.nan)
     )
     P = A["covariance"]
+    us = units_of(s)
+    F, FL, FL2, L = us.of(field=1), us.of(field=1, length=-1), us.of(field=1, length=-2), us.of(length=1)
     T, P2, X = ("time",), ("time", "platform", "xy"), ("time", "xy")
     data = {
-        "z_true": (T, A["z_true"], {"long_name": "field at the formation centre", "units": u.field}),
-        "z_est": (T, A["z_est"], {"long_name": "filter estimate of z at the centre", "units": u.field}),
-        "z_std": (T, np.sqrt(P[:, 0, 0]), {"long_name": "filter standard deviation of z", "units": u.field}),
-        "grad_true": (X, A["grad_true"], {"long_name": "true gradient", "units": f"{u.field}/{u.length}"}),
-        "grad_est": (X, A["grad_est"], {"long_name": "estimated gradient", "units": f"{u.field}/{u.length}"}),
-        "grad_std": (X, np.sqrt(np.stack([P[:, 1, 1], P[:, 2, 2]], -1)), {"units": f"{u.field}/{u.length}"}),
-        "hess_true": (X + ("xy2",), A["hess_true"], {"units": f"{u.field}/{u.length}^2"}),
-        "hess_est": (X + ("xy2",), A["hess_est"], {"units": f"{u.field}/{u.length}^2"}),
-        "r": (P2, A["r"], {"long_name": "platform position", "units": u.length}),
-        "v": (P2, A["v"], {"long_name": "platform velocity", "units": f"{u.length}/{u.time}"}),
-        "center": (X, center, {"long_name": "formation centre", "units": u.length}),
-        "measurements": (("time", "platform"), A["measurements"], {"units": u.field}),
-        "a": (T, half, {"long_name": "half distance of platforms 1-2", "units": u.length}),
-        "b": (T, other, {"long_name": "half distance of platforms 3-4", "units": u.length}),
-        "a_desired": (T, A["a_desired"], {"units": u.length}),
-        "b_desired": (T, A["b_desired"], {"units": u.length}),
-        "shape_error": (T, shape_error(q, A["q_desired"]), {"long_name": "|q - q_d|", "units": u.length}),
+        "z_true": (T, A["z_true"], {"long_name": "true field value at the formation centre", "units": F}),
+        "z_est": (T, A["z_est"], {"long_name": "filter estimate of the field at the centre", "units": F}),
+        "z_std": (T, np.sqrt(P[:, 0, 0]), {"long_name": "filter standard deviation of the field estimate",
+                                           "units": F}),
+        "grad_true": (X, A["grad_true"], {"long_name": "true field gradient at the centre", "units": FL}),
+        "grad_est": (X, A["grad_est"], {"long_name": "filter estimate of the gradient at the centre", "units": FL}),
+        "grad_std": (X, np.sqrt(np.stack([P[:, 1, 1], P[:, 2, 2]], -1)),
+                     {"long_name": "filter standard deviation of each gradient component", "units": FL}),
+        "hess_true": (X + ("xy2",), A["hess_true"], {"long_name": "true field Hessian at the centre", "units": FL2}),
+        "hess_est": (X + ("xy2",), A["hess_est"], {"long_name": "Hessian estimate used by the filter", "units": FL2}),
+        "r": (P2, A["r"], {"long_name": "platform position", "units": L}),
+        "v": (P2, A["v"], {"long_name": "platform velocity", "units": us.of(length=1, time=-1)}),
+        "center": (X, center, {"long_name": "formation centre (mean platform position)", "units": L}),
+        "measurements": (("time", "platform"), A["measurements"],
+                         {"long_name": "noisy field measurement of each platform", "units": F}),
+        "a": (T, half, {"long_name": "half distance of platforms 1 and 2", "units": L}),
+        "b": (T, other, {"long_name": "half distance of platforms 3 and 4 (NaN with fewer than 4)", "units": L}),
+        "a_desired": (T, A["a_desired"], {"long_name": "desired half distance a", "units": L}),
+        "b_desired": (T, A["b_desired"], {"long_name": "desired half distance b", "units": L}),
+        "shape_error": (T, shape_error(q, A["q_desired"]),
+                        {"long_name": "formation shape error |q - q_desired| (Jacobi vectors)", "units": L}),
         "theta": (T, theta, {"long_name": "heading error w.r.t. the true level curve", "units": "rad"}),
         "theta_est": (T, theta_est, {"long_name": "heading error seen by the controller", "units": "rad"}),
     }  # fmt: skip
@@ -68,20 +75,31 @@ def replay_dataset(record: ReplayRecord, system: ReplaySystem, seed: int) -> Any
     if isinstance(system.center, CenterLevelCurve):
         level = system.center.controller.level
         V = system.center.controller.lyapunov(theta, A["z_true"])
-        data["lyapunov"] = (T, V, {"long_name": "V = -log cos^2(theta/2) + h(z) on the true field"})
+        data["lyapunov"] = (T, V, {"long_name": "Lyapunov function -log cos^2(theta/2) + h(z) on the true field",
+                                   "units": "1"})  # fmt: skip
     if record.reference is not None:
         error = np.linalg.norm(center - record.reference, axis=-1)
-        data["reference"] = (X, record.reference, {"long_name": "reference centre path", "units": u.length})
-        data["reference_error"] = (T, error, {"long_name": "|r_c - reference|", "units": u.length})
+        data["reference"] = (X, record.reference, {"long_name": "reference path of the centre", "units": L})
+        data["reference_error"] = (T, error, {"long_name": "distance of the centre from its reference", "units": L})
     attrs = {
+        "title": f"mobisense: field replay '{s.name}'",
         "C": level, "scenario": s.name, "seed": seed, "field": s.field.kind, "formation": s.formation.kind,
         "motion": s.motion.kind, "length_unit": u.length, "time_unit": u.time, "field_unit": u.field,
         "time_step": s.time_step,
     }  # fmt: skip
-    coords = {"time": A["t"], "platform": np.arange(1, N + 1), "xy": ["x", "y"], "xy2": ["x", "y"]}
-    ds = xr.Dataset(data, coords=coords, attrs=attrs)
-    ds["time"].attrs["units"] = u.time
-    return ds
+    coords = {
+        "time": ("time", A["t"], {"long_name": "time of the filter samples", "units": us.of(time=1)}),
+        "platform": ("platform", np.arange(1, N + 1), {"long_name": "platform number", "units": "1"}),
+        "xy": ("xy", ["x", "y"], {"long_name": "planar component"}),
+        "xy2": ("xy2", ["x", "y"], {"long_name": "planar component (second index of the Hessian)"}),
+    }
+    return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def units_of(scenario: Any) -> UnitSystem:
+    """The :class:`~mobisense.core.units.UnitSystem` of a field-replay scenario (length, time, field)."""
+    u = scenario.units
+    return UnitSystem(u.length, u.time, {"field": u.field})
 
 
 def _rms(x: np.ndarray) -> float:

@@ -44,29 +44,37 @@ class FieldReplayResult(SimulationResult):
 
     def report(self, folder: Path) -> None:
         """Level error, estimation errors, shape error and where the files went."""
+        from ...core.units import UnitSystem
+
         s = self.summary
-        u = s["units"]
+        units = UnitSystem(s["units"]["length"], s["units"]["time"], {"field": s["units"]["field"]})
+
+        def unit(**powers: int) -> str:
+            text = units.of(**powers)
+            return "" if text == "1" else f" {text}"
+
         rate = s["simulated_time_per_wall_second"]
         print(
-            f"{s['scenario']}: {s['platforms']} platforms, {s['duration']:g} {u['time']} in "
-            f"{s['wall_time_s']:.2f} s ({rate:.3g} {u['time']} per wall second), {s['derivatives']}"
+            f"{s['scenario']}: {s['platforms']} platforms, {s['duration']:g}{unit(time=1)} simulated in "
+            f"{s['wall_time_s']:.2f} s of wall time ({rate:.3g}{unit(time=1)} per second); derivatives from "
+            f"{s['derivatives']}"
         )
         if "level" in s:
-            print(f"  level {s['level']:g} {u['field']}: final |z − C| = {s['final_level_error']:.3g}, "
+            print(f"  level z = {s['level']:g}{unit(field=1)}: final |z − level| = {s['final_level_error']:.3g}, "
                   f"RMS over the last half {s['rms_level_error_last_half']:.3g}; "
-                  f"mean |θ| (last quarter) = {s['mean_abs_theta_last_quarter']:.3g} rad")  # fmt: skip
+                  f"mean |θ| over the last quarter {s['mean_abs_theta_last_quarter']:.3g} rad")  # fmt: skip
         print(
-            f"  estimates: RMS z error {s['rms_z_error']:.3g} {u['field']}, RMS gradient error "
-            f"{s['rms_gradient_error']:.3g} {u['field']}/{u['length']}, "
-            f"mean NEES {s['mean_nees']:.3g} (3 if consistent)"
+            f"  estimates at the centre: RMS error of z {s['rms_z_error']:.3g}{unit(field=1)}, of ∇z "
+            f"{s['rms_gradient_error']:.3g}{unit(field=1, length=-1)}; mean NEES {s['mean_nees']:.3g} "
+            "(3 = consistent filter of z and ∇z)"
         )
         b = "" if s["b_final"] is None or s["b_final"] != s["b_final"] else f", b = {s['b_final']:.4g}"
-        print(f"  shape error (RMS, last half) {s['shape_error_rms_last_half']:.3g} {u['length']}; "
-              f"final a = {s['a_final']:.4g}{b} {u['length']}")  # fmt: skip
+        print(f"  shape error (RMS, last half) {s['shape_error_rms_last_half']:.3g}{unit(length=1)}; "
+              f"final half distances a = {s['a_final']:.4g}{b}{unit(length=1)}")  # fmt: skip
         if "reference_tracking_rms" in s:
             print(
-                f"  reference tracking: RMS {s['reference_tracking_rms']:.3g}, "
-                f"max {s['reference_tracking_max']:.3g}"
+                f"  distance of the centre from its reference: RMS {s['reference_tracking_rms']:.3g}, "
+                f"max {s['reference_tracking_max']:.3g}{unit(length=1)}"
             )
         super().report(folder)
 
@@ -101,10 +109,12 @@ class PlanReplayResult(SimulationResult):
         s = self.summary
         mc = s["monte_carlo"]
         print(s["solution"])
-        print(f"{s['scenario']}: tracking error max {s['tracking_error_max']:.3g}, RMS "
-              f"{s['tracking_error_rms']:.3g} (L)")  # fmt: skip
+        length = self.solution.problem.units.length
+        print(f"{s['scenario']}: distance of the platforms from the planned paths: max {s['tracking_error_max']:.3g}, "
+              f"RMS {s['tracking_error_rms']:.3g} {length}")  # fmt: skip
         print(
-            f"  Monte Carlo ({mc['runs']} runs, Δt = {mc['time_step']:.3g}): average NEES "
+            f"  Monte Carlo ({mc['runs']} runs, Δt = {mc['time_step']:.3g} {self.solution.problem.units.time}): "
+            "average normalised estimation error squared (NEES) "
             f"{mc['nees_predicted_mean']:.3f} (n = {self.solution.problem.n}); inside the "
             f"{100 * mc['confidence']:.0f}% band at "
             f"{100 * mc['fraction_inside_band_predicted']:.1f}% of the steps"
@@ -165,16 +175,17 @@ def run_plan_replay(scenario: Any, source: Path, seed: int | None = None) -> Pla
     Raises
     ------
     ConfigError
-        Neither the solution nor the problem exists, one is invalid, or ``initial_offset`` does not match.
+        The solution cannot be used and there is no problem to solve, the problem is invalid, or
+        ``initial_offset`` does not match (:func:`~mobisense.formation.replay.reference.load_checked`).
     RuntimeError
         The plan had to be solved and the solver did not reach ε = 1.
     """
     from ...core.config import ConfigError
     from .plan import replay_solution, resolve
-    from .reference import load_or_solve
+    from .reference import load_checked
 
     solution_path = resolve(source, scenario.solution)
-    solution, note = load_or_solve(solution_path, resolve(source, scenario.problem))
+    solution, note, solved_here = load_checked(solution_path, resolve(source, scenario.problem))
     N = solution.problem.N
     if scenario.initial_offset is not None and len(scenario.initial_offset) != N:
         raise ConfigError(
@@ -189,4 +200,4 @@ def run_plan_replay(scenario: Any, source: Path, seed: int | None = None) -> Pla
         "seed": scenario.seed if seed is None else seed,
         **summary,
     }
-    return PlanReplayResult(ds, summary, solution, solved_here=not solution_path.is_file())
+    return PlanReplayResult(ds, summary, solution, solved_here=solved_here)

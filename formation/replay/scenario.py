@@ -37,6 +37,7 @@ from ...core.config import (
     Vector2,
     parse_config,
 )
+from ...core.units import LengthUnit, PhysicalUnit, TimeUnit
 from ...estimation.cooperative.information_model import cross_formation
 from ...estimation.cooperative.noise_config import NoiseConfig
 from ...estimation.cooperative.spatial_noise import SpatialNoiseConfig
@@ -293,11 +294,11 @@ class FilterConfig(StrictModel):
 
 
 class UnitsConfig(StrictModel):
-    """Unit labels for figures: length, time, field."""
+    """Units of the file's numbers (UDUNITS; default metre, second, dimensionless field), written to result.nc."""
 
-    length: str = "L"
-    time: str = "T"
-    field: str = "F"
+    length: LengthUnit = "m"
+    time: TimeUnit = "s"
+    field: PhysicalUnit = "1"
 
 
 class PlotConfig(StrictModel):
@@ -318,6 +319,7 @@ class PlotConfig(StrictModel):
 class FieldReplayScenario(StrictModel):
     """A closed-loop replay on a field: formation control + level-curve tracking + cooperative filter."""
 
+    kind: Literal["field_replay"] | None = Field(None, description="file kind (optional: a 'field' key tells it)")
     name: str = Field(pattern=r"^[A-Za-z0-9_.\-]+$")
     field: FieldSpec
     spatial_noise: SpatialNoiseConfig | None = None

@@ -33,7 +33,8 @@ __all__ = ["SweepSpec", "SweepTask", "load_sweep", "expand_sweep"]
 class SweepSpec(StrictModel):
     """A sweep: base problem file, expansion mode and the values of each varied key path."""
 
-    base: str
+    kind: Literal["sweep"] | None = Field(None, description="file kind (optional: a 'vary' key makes it a sweep)")
+    base: str = Field(description="the base problem file, relative to the sweep file")
     mode: Literal["grid", "zip"] = "grid"
     vary: dict[str, list[Any]] = Field(min_length=1)
 

@@ -213,7 +213,10 @@ def solve_indirect(
         states and costates seed the BVP at ε = 1 directly (with ``solver.bvp.refine_solver``); if that
         does not converge, the continuation from the Kalman solution runs.
 
-    See :func:`indirect_continuation`, which also returns the dense BVP solution.
+    Returns
+    -------
+    Solution
+        ``method="indirect"``; see :func:`indirect_continuation`, which also returns the dense BVP solution.
     """
     if init is not None and init.success and init.Lam is not None:
         seeded = _solve_seeded(problem, init)

@@ -1,4 +1,4 @@
-"""Execute every notebook in notebooks/ (committed without outputs), with notebooks/ as working directory.
+"""Execute every notebook in notebooks/ again (`make notebooks` stores their outputs), from notebooks/.
 
 Any cell error fails the test. Notebooks write their outputs to a temporary folder, never into the repository.
 """

@@ -23,12 +23,30 @@ def test_readme_starts_with_the_two_commands():
     assert first_block[0].startswith("make demo") and first_block[1].startswith("make test")
 
 
+#: folders the README copies the examples into (``examples --copy DIR``): paths in them go to the test's folder
+WORDS = [shlex.split(command, comments=True) for command in COMMANDS]
+COPIED = {words[i + 1] for words in WORDS for i, word in enumerate(words) if word == "--copy"}
+#: options whose argument is an output the test redirects into its temporary folder
+OUTPUTS = ("--out", "--copy")
+
+
 @pytest.mark.parametrize("command", COMMANDS)
 def test_readme_command_runs(command, tmp_path, monkeypatch):
     monkeypatch.chdir(ROOT)
-    args = shlex.split(command)[1:]
-    args = [str(tmp_path / Path(a).name) if i > 0 and args[i - 1] == "--out" else a for i, a in enumerate(args)]
-    assert cli.main(args) == 0, command
+    args = shlex.split(command, comments=True)[1:]
+    if any(a.split("/")[0] in COPIED for a in args if "/" in a):
+        assert cli.main(["examples", "--copy", str(tmp_path / next(iter(COPIED)))]) == 0
+    args = [
+        str(tmp_path / Path(a).name) if i > 0 and args[i - 1] in OUTPUTS
+        else str(tmp_path / a) if "/" in a and a.split("/")[0] in COPIED
+        else a
+        for i, a in enumerate(args)
+    ]  # fmt: skip
+    try:
+        status = cli.main(args)
+    except SystemExit as exit_:  # --version and --help exit from argparse
+        status = exit_.code
+    assert status == 0, command
 
 
 PYTHON_BLOCKS = re.findall(r"```python\n(.*?)```", README, flags=re.S)

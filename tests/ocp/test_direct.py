@@ -207,17 +207,6 @@ def test_save_and_load_round_trip(default_solution, tmp_path):
     assert loaded.summary() == default_solution.summary()
 
 
-def test_saved_file_is_the_file_xarray_writes(default_solution, tmp_path):
-    # save() writes with h5netcdf alone (no pandas/dask on the solve path); xarray's own writer is the reference
-    import xarray as xr
-
-    default_solution.save(tmp_path)
-    default_solution.to_dataset().to_netcdf(tmp_path / "xarray.nc", engine="h5netcdf")
-    with xr.open_dataset(tmp_path / "solution.nc", engine="h5netcdf") as mine:
-        with xr.open_dataset(tmp_path / "xarray.nc", engine="h5netcdf") as theirs:
-            xr.testing.assert_identical(mine.load(), theirs.load())
-
-
 def test_cvodes_coasting_equals_scipy_integration():
     # the compiled CVODES coasting solution (initial guess, baseline) against scipy's DOP853 at rtol 1e-12
     from mobisense.ocp.simulate import coast

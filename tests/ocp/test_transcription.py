@@ -70,16 +70,19 @@ def test_assembled_derivatives_equal_casadi_differentiation_of_the_nlp(scheme):
         np.testing.assert_allclose(mine, ref, rtol=0, atol=1e-12 * max(1.0, np.abs(ref).max()))
 
 
-def test_nlp_sizes_are_those_of_the_eliminated_layout():
-    K, d = 7, 3
+@pytest.mark.parametrize("scheme,d", [("radau", 3), ("radau", 2), ("legendre", 3)])
+def test_nlp_sizes_are_those_of_the_eliminated_layout(scheme, d):
+    K = 7
     problem = _bounded_problem(K)
     s = Structure.of(problem)
-    tr = DirectCollocation(s, "radau", d, K, codegen="off")
+    tr = DirectCollocation(s, scheme, d, K, codegen="off")
     ns, nu, N = s.n_sigma, s.nu, s.N
-    # docs/theory/direct.md (direct.2): per interval σ at d nodes, u at d nodes, (p, v) at the interval end;
-    # rows: 4N sensor gaps, d·ns collocation rows of σ, d bound rows of the one bounded sensor; + 2 terminal
-    assert tr.nw == K * (d * ns + d * nu + 4 * N) == tr.nlp["x"].numel()
-    assert tr.ng == K * (4 * N + d * ns + d * 1) + 2 == tr.nlp["g"].numel()
+    # docs/theory/direct.md (direct.2): per interval σ at d nodes, u at d nodes, and what it hands on — (p, v)
+    # at the interval end with Radau, the whole state with Legendre (no node at τ = 1); rows: those gaps,
+    # d·ns collocation rows of σ, d bound rows of the one bounded sensor; + 2 terminal rows (v(tf) of sensor 1)
+    handed_on = 4 * N if scheme == "radau" else s.nx
+    assert tr.nw == K * (d * ns + d * nu + handed_on) == tr.nlp["x"].numel()
+    assert tr.ng == K * (handed_on + d * ns + d * 1) + 2 == tr.nlp["g"].numel()
 
 
 @pytest.mark.slow

@@ -1,0 +1,167 @@
+"""Input files of every kind: recognised, validated, described; their schemas; the shipped examples."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import pytest
+import yaml
+from reference_problems import PROBLEMS, hussein2008
+
+from mobisense import cli
+from mobisense.core.config import ConfigError
+from mobisense.core.examples import EXAMPLES, copy_examples, resolve_input, shipped_examples
+from mobisense.core.kinds import FILE_KINDS, detect_kind
+from mobisense.core.schema import file_schema
+
+#: the kind of every shipped example, told by its shape alone (none has a kind: key)
+SHIPPED_KINDS = {
+    "hussein2008": "problem", "coupled_two_sensor": "problem", "terminal_and_bound": "problem",
+    "sweep_hussein2008": "sweep", "formation_cross": "formation", "formation_cross_equal_sides": "formation",
+    "formation_cross_interior": "formation", "replay_hussein2008": "plan_replay",
+    "replay_two_charges": "field_replay", "replay_isotherm13": "field_replay",
+    "leader_follower_control1": "leader_follower", "leader_follower_control2": "leader_follower",
+    "leader_follower_control3": "leader_follower", "leader_follower_five_agents": "leader_follower",
+    "leader_follower_khepera": "leader_follower", "distributed_advection_diffusion": "distributed",
+    "hussein2008_paper": "problem", "replay_two_charges_fig3": "field_replay",
+    "replay_isotherm13_adaptive": "field_replay", "replay_isotherm13_paper": "field_replay",
+    "leader_follower_control3_paper": "leader_follower", "leader_follower_khepera2": "leader_follower",
+    "leader_follower_khepera_switching": "leader_follower", "distributed_advection_diffusion_paper": "distributed",
+    "distributed_advection_diffusion_paper_consistent": "distributed",
+}  # fmt: skip
+
+
+def _data(name: str) -> dict:
+    return yaml.safe_load((PROBLEMS / f"{name}.yaml").read_text(encoding="utf-8"))
+
+
+def test_every_shipped_file_is_listed_once_and_ships_as_package_data():
+    assert sorted(e.name for e in EXAMPLES) == sorted(p.stem for p in PROBLEMS.glob("*.yaml"))
+    assert all(path.is_file() for path in shipped_examples().values())
+
+
+@pytest.mark.parametrize("name", sorted(SHIPPED_KINDS))
+def test_shipped_files_are_recognised_by_shape_and_by_kind_key(name):
+    data = _data(name)
+    assert detect_kind(data, name) == SHIPPED_KINDS[name]
+    assert detect_kind({**data, "kind": SHIPPED_KINDS[name]}, name) == SHIPPED_KINDS[name]
+
+
+def test_an_unknown_or_unclear_kind_is_one_line_with_the_choices():
+    with pytest.raises(ConfigError, match=r"kind: unknown file kind 'swep'; did you mean 'sweep'\?"):
+        detect_kind({"kind": "swep"}, "f.yaml")
+    with pytest.raises(ConfigError, match=r"fits no kind; add 'kind: …' \(one of distributed, field_replay"):
+        detect_kind({"name": "x"}, "f.yaml")
+
+
+def test_validate_says_what_each_file_is(capsys):
+    files = [str(PROBLEMS / f"{name}.yaml") for name in sorted(SHIPPED_KINDS) if name != "sweep_hussein2008"]
+    assert cli.main(["validate", *files]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == len(files)
+    for name, line in zip(sorted(n for n in SHIPPED_KINDS if n != "sweep_hussein2008"), lines, strict=True):
+        assert f"valid {SHIPPED_KINDS[name]} file" in line, line
+
+
+@pytest.mark.slow
+def test_validate_a_sweep_checks_every_task(capsys):
+    assert cli.main(["validate", str(PROBLEMS / "sweep_hussein2008.yaml")]) == 0
+    assert "parameter sweep (grid) of 6 tasks over cost.alpha (3 values) x sensors[0].p0 (2 values)" in (
+        capsys.readouterr().out
+    )
+
+
+def test_validate_reports_every_invalid_file_and_exits_2(tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump({**_data("formation_cross"), "bounds": {"a": [3.0, 0.2], "b": [0.2, 3.0]}}))
+    wrong = tmp_path / "wrong.yaml"
+    wrong.write_text(yaml.safe_dump({**_data("hussein2008"), "kind": "sweep"}))
+    assert cli.main(["validate", str(bad), str(PROBLEMS / "hussein2008.yaml"), str(wrong)]) == 2
+    captured = capsys.readouterr()
+    assert f"{bad}: bounds.a: expected [min, max]" in captured.err
+    assert f"{wrong}: (top level)" in captured.err or f"{wrong}: " in captured.err
+    assert "valid problem file" in captured.out
+
+
+def test_a_problem_file_may_say_kind_problem_and_other_commands_refuse_it(tmp_path):
+    path = tmp_path / "p.yaml"
+    path.write_text(yaml.safe_dump({**hussein2008(), "kind": "problem"}))
+    assert cli.main(["validate", str(path)]) == 0
+    assert cli.main(["replay", str(path)]) == 2
+
+
+@pytest.mark.parametrize("kind", sorted(FILE_KINDS))
+def test_schema_is_json_schema_that_accepts_the_shipped_files(kind, tmp_path):
+    jsonschema = pytest.importorskip("jsonschema")
+    schema = file_schema(kind)
+    jsonschema.Draft202012Validator.check_schema(schema)
+    for name in (n for n, k in SHIPPED_KINDS.items() if k == kind):
+        jsonschema.validate(_data(name), schema)
+    out = tmp_path / f"{kind}.schema.json"
+    assert cli.main(["schema", kind, "--out", str(out)]) == 0
+    assert json.loads(out.read_text()) == json.loads(json.dumps(schema))
+
+
+def test_schema_rejects_a_misspelled_key_and_lists_registered_noise_models():
+    jsonschema = pytest.importorskip("jsonschema")
+    schema = file_schema("problem")
+    data = hussein2008()
+    data["cost"]["alhpa"] = data["cost"].pop("alpha")
+    assert not jsonschema.Draft202012Validator(schema).is_valid(data)
+    variants = schema["$defs"]["NoiseModel"]["oneOf"]
+    assert {v["properties"]["model"]["const"] for v in variants} >= {"quadratic_range", "constant"}
+
+
+def test_examples_lists_one_line_each_and_copies_them(tmp_path, capsys):
+    assert cli.main(["examples"]) == 0
+    out = capsys.readouterr().out
+    for example in EXAMPLES:
+        assert re.search(rf"^{example.name} +\S.*\[mobisense {example.command}\]$", out, flags=re.M)
+    assert cli.main(["examples", "--copy", str(tmp_path / "ex")]) == 0
+    assert sorted(p.name for p in (tmp_path / "ex").iterdir()) == sorted(f"{e.name}.yaml" for e in EXAMPLES)
+    (tmp_path / "ex" / "hussein2008.yaml").write_text("changed")
+    with pytest.raises(FileExistsError):
+        copy_examples(tmp_path / "ex")
+    assert cli.main(["examples", "--copy", str(tmp_path / "ex")]) == 2
+    assert cli.main(["examples", "--copy", str(tmp_path / "ex"), "--force"]) == 0
+
+
+def test_a_shipped_name_resolves_unless_a_file_of_that_name_exists(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert resolve_input("hussein2008") == shipped_examples()["hussein2008"]
+    assert resolve_input("hussein2008.yaml") == shipped_examples()["hussein2008"]
+    (tmp_path / "hussein2008.yaml").write_text("mine")
+    assert str(resolve_input("hussein2008.yaml")) == "hussein2008.yaml"
+    assert str(resolve_input("sub/hussein2008.yaml")) == "sub/hussein2008.yaml"  # a path is never replaced
+
+
+def test_copied_examples_validate_where_they_are(tmp_path, capsys):
+    written = copy_examples(tmp_path)
+    files = [str(p) for p in written if p.stem not in ("sweep_hussein2008",)]
+    assert cli.main(["validate", *files]) == 0
+
+
+def test_a_missing_extra_is_one_line_saying_what_to_install(monkeypatch, capsys):
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "dask" else real(name, *a))
+    assert cli.main(["sweep", str(PROBLEMS / "sweep_hussein2008.yaml")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == 'mobisense: error: mobisense sweep needs dask (not installed): pip install "mobisense[sweep]"'
+
+
+def test_the_default_install_leaves_the_sweep_dependencies_to_the_extra():
+    tomllib = pytest.importorskip("tomllib")
+    project = tomllib.loads((PROBLEMS.parent / "pyproject.toml").read_text())["project"]
+    names = {re.split(r"[<>=\[ ]", d)[0] for d in project["dependencies"]}
+    assert not names & {"dask", "distributed", "pyarrow"}
+    assert {re.split(r"[<>=\[ ]", d)[0] for d in project["optional-dependencies"]["sweep"]} == {"dask", "pyarrow"}
+    assert project["license"] == "BSD-3-Clause" and (PROBLEMS.parent / "LICENSE").is_file()
+
+
+def test_the_readme_describes_every_shipped_example_in_one_line():
+    readme = (PROBLEMS.parent / "README.md").read_text(encoding="utf-8")
+    for example in EXAMPLES:
+        assert re.search(rf"^\| `{example.name}\.yaml` \| `{example.command}` \| \S", readme, flags=re.M), example.name
