@@ -33,9 +33,9 @@ class SolveStatus(str, Enum):
 class StartKind(str, Enum):
     """How a direct solve started (``stats["start"]``; the value is what ``summary.json`` shows)."""
 
-    CONTINUATION = "continuation from coasting"
+    CONTINUATION = "from coasting (solver.strategy)"
     WARM = "warm start from init"
-    WARM_FAILED = "warm start from init failed; continuation from coasting"
+    WARM_FAILED = "warm start from init failed; from coasting (solver.strategy)"
     GUESS = "initial guess, ε = 1 directly"
     INIT_WITHOUT_POINT = "init ignored: it carries no converged ε = 1 NLP point"
     INIT_OTHER_LAYOUT = "init ignored: different structure or grid"
@@ -54,7 +54,7 @@ class TrajectorySample:
 
 @dataclass
 class HomotopyStep:
-    """One continuation step: ε, J_ε, Ipopt iterations and status, wall time (s)."""
+    """One solve of a start: ε, J_ε, Ipopt iterations and status, wall time (s), which start it belongs to."""
 
     eps: float
     cost: float
@@ -62,6 +62,7 @@ class HomotopyStep:
     status: str
     time_s: float
     success: bool = True
+    start: str = ""
 
 
 @dataclass
@@ -238,7 +239,14 @@ class Solution:
             "control_energy": self.control_energy,
             "solve_time_s": float(sum(step.time_s for step in self.homotopy)),
             "homotopy": [
-                {"eps": s.eps, "cost": s.cost, "iterations": s.iterations, "status": s.status, "time_s": s.time_s}
+                {
+                    "eps": s.eps,
+                    "cost": s.cost,
+                    "iterations": s.iterations,
+                    "status": s.status,
+                    "time_s": s.time_s,
+                    "start": s.start,
+                }
                 for s in self.homotopy
             ],
             "baseline": self.baseline,
