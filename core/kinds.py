@@ -81,6 +81,9 @@ FILE_KINDS: dict[str, FileKind] = {
                  "mobisense.formation.distributed.simulation:DistributedScenario",
                  "mobisense.formation.commands:check_scenario",
                  lambda d: "network" in d or ("field" in d and "platforms" not in d and "motion" not in d)),
+        FileKind("replan", "plan, fly, re-plan under a current (Monte Carlo vs open loop)", "mobisense replay",
+                 "mobisense.formation.replay.replan:ReplanScenario", "mobisense.formation.commands:check_scenario",
+                 lambda d: "replan" in d),
     )
 }  # fmt: skip
 

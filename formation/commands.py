@@ -155,6 +155,14 @@ def check_scenario(data: dict, path: Path, kind: str) -> str:
             f"{config.motion.kind.replace('_', ' ')} motion on the field {config.field.kind!r} for "
             f"{config.duration:g} {config.units.time}"
         )
+    if kind == "replan":
+        from ..ocp.problem import load_problem
+
+        load_problem(path.parent / config.problem)  # the problem it flies must be valid too
+        return (
+            f"re-planning of {config.problem!r} every {config.replan.every:g} ({config.replan.horizon} horizon), "
+            f"{config.monte_carlo.runs} Monte Carlo runs"
+        )
     if kind == "leader_follower":
         runs = ", ".join(f"{name} ({control})" for name, control, _, _ in config.resolved_runs())
         return (

@@ -2,6 +2,7 @@
 
 - ``field_replay`` (a ``field:`` key): :func:`~mobisense.formation.replay.runs.run_field_replay`;
 - ``plan_replay`` (a ``solution:`` key): :func:`~mobisense.formation.replay.runs.run_plan_replay`;
+- ``replan`` (``kind: replan``): :func:`~mobisense.formation.replay.replan.run_replan`;
 - ``leader_follower`` (``mobisense simulate leader-follower``):
   :func:`~mobisense.formation.leader_follower.runs.run_leader_follower`;
 - ``distributed`` (``mobisense simulate distributed``):
@@ -31,6 +32,7 @@ SCENARIO_KINDS: dict[str, str] = {
     "plan_replay": "mobisense.formation.replay.plan:OcpReplayScenario",
     "leader_follower": "mobisense.formation.leader_follower.scenario:LeaderFollowerScenario",
     "distributed": "mobisense.formation.distributed.simulation:DistributedScenario",
+    "replan": "mobisense.formation.replay.replan:ReplanScenario",
 }
 
 
@@ -68,6 +70,10 @@ class Scenario:
             from .replay.runs import run_plan_replay
 
             return run_plan_replay(self.config, self.source, seed)
+        if self.kind == "replan":
+            from .replay.replan import run_replan
+
+            return run_replan(self.config, self.source, seed)
         if self.kind == "leader_follower":
             from .leader_follower.runs import run_leader_follower
 
@@ -93,10 +99,10 @@ def replay_kind(data: Any, source: Path) -> str:
     if data is None:
         raise ConfigError(f"{source}: (top level): the file is empty; expected a mapping of keys")
     if not isinstance(data, dict):
-        raise ConfigError(f"{source}: (top level): expected a mapping of keys (a field replay or a plan replay)")
+        raise ConfigError(f"{source}: (top level): expected a mapping of keys (a field replay, a plan replay or a re-planning file)")
     kind = data.get("kind")
     kind = kind if isinstance(kind, str) else None  # a list or mapping is reported by the model
-    if kind in ("field_replay", "plan_replay"):
+    if kind in ("field_replay", "plan_replay", "replan"):
         return str(kind)
     if kind in FILE_KINDS:
         raise ConfigError(f"{source}: kind: a {kind} file is not a replay: run it with {FILE_KINDS[kind].command}")

@@ -41,5 +41,9 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "agreement": "mobisense.ocp.compare",
         "save_figures": "mobisense.ocp.plots",
         "effective_noise": "mobisense.ocp.plots",
+        "PathConstraints": "mobisense.ocp.path_constraints",
+        "Disturbance": "mobisense.ocp.replan",
+        "fly": "mobisense.ocp.replan",
+        "replan_monte_carlo": "mobisense.ocp.replan",
     },
 )

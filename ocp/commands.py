@@ -47,6 +47,12 @@ class SolveCommand:
             help="override solver.strategy (direct method: which starts to solve, docs/theory/direct.md §5.6)",
         )
         parser.add_argument("--no-plot", action="store_true", help="skip the figures")
+        parser.add_argument(
+            "--sensitivities",
+            action="store_true",
+            help="direct method: add dJ*/d(value) of every number of the file to summary.json "
+            "(envelope theorem, docs/theory/path_constraints.md §4)",
+        )
         parser.add_argument("--quiet", action="store_true", help="no progress display or table")
         parser.add_argument(
             "--multistart",
@@ -79,6 +85,8 @@ class SolveCommand:
         cluster = Cluster.from_args(args)
         if args.multistart is None and (cluster.scheduler or cluster.workers):
             raise ConfigError(f"{source}: --workers/--scheduler: only used with --multistart")
+        if args.sensitivities and problem.solver.method != "direct":
+            raise ConfigError(f"{source}: --sensitivities: expected solver.method 'direct'")
         if args.multistart is not None:
             from ..core.extras import require_extra
 
@@ -103,6 +111,11 @@ class SolveCommand:
                     solution = solve_multistart(problem, starts, cluster.scheduler, cluster.workers, cluster.security)
                 else:
                     solution = reporter.run(problem.solver.method)
+                if args.sensitivities and solution.success and solution.nlp is not None:
+                    from .direct.sensitivities import solution_sensitivities
+                    from .direct.transcription import transcription_for
+
+                    solution.stats["sensitivities"] = solution_sensitivities(transcription_for(problem), solution)
             solution.save(out)
             if not args.no_plot:
                 from .plots import save_figures

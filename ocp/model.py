@@ -15,6 +15,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from .path_constraints import path_parameter_blocks, path_parameter_values, path_rows, path_structure
 from .problem import Problem
 from .registries import NOISE_MODELS
 from .state_layout import StateLayout
@@ -33,6 +34,8 @@ class Structure:
     fixed_position: tuple[bool, ...]
     fixed_velocity: tuple[bool, ...]
     bounded_control: tuple[bool, ...]
+    #: path constraints (:func:`~mobisense.ocp.path_constraints.path_structure`)
+    path: tuple[tuple[Any, ...], ...] = ()
 
     @classmethod
     def of(cls, problem: Problem) -> Structure:
@@ -45,6 +48,7 @@ class Structure:
             fixed_position=tuple(s.terminal is not None and s.terminal.p is not None for s in sensors),
             fixed_velocity=tuple(s.terminal is not None and s.terminal.v is not None for s in sensors),
             bounded_control=tuple(s.u_max is not None for s in sensors),
+            path=path_structure(problem.constraints, problem.N),
         )
 
     @property
@@ -110,6 +114,7 @@ class ParameterLayout:
                 blocks.append((f"vT_{i}", (2,)))
             if s.bounded_control[i]:
                 blocks.append((f"umax_{i}", (1,)))
+        blocks += path_parameter_blocks(s.path)
         self.blocks = blocks
         self.offsets: dict[str, tuple[int, tuple[int, ...]]] = {}
         offset = 0
@@ -174,6 +179,7 @@ class ParameterLayout:
                 values[f"vT_{i}"] = sensor.terminal.v
             if sensor.u_max is not None:
                 values[f"umax_{i}"] = sensor.u_max
+        values.update(path_parameter_values(problem.constraints, problem.N))
         return values
 
 
@@ -219,6 +225,13 @@ class SensorKalmanModel:
         p_sym = ca.SX.sym("p", 2 * N)
         S_p = self._information([p_sym[2 * i : 2 * i + 2] for i in range(N)], b)
         self.information = ca.Function("information", [p_sym, P], [ca.reshape(S_p, n * n, 1)], ["p", "P"], ["S"])
+        # path constraints of one instant, g(x, P) ≤ 0 scaled, and the physical size of a unit of each row
+        rows, units, self.path_labels = path_rows(
+            [pos[i] for i in range(N)], [vel[i] for i in range(N)], b, s.path
+        )
+        self.n_path_rows = len(rows)
+        self.path = ca.Function("path", [x, P], [ca.vertcat(*rows) if rows else ca.SX(0, 1)], ["x", "P"], ["g"])
+        self.path_scale = ca.Function("path_scale", [P], [ca.vertcat(*units) if units else ca.SX(0, 1)])
 
     def _information(self, positions: list[Any], b: dict[str, Any]) -> Any:
         """S(p) = Σ_i C_i' diag(1/r_i(p_i)) C_i  (docs/theory/ocp.md, eq. ocp.3, with R block-diagonal)."""

@@ -13,6 +13,7 @@ import casadi as ca
 import numpy as np
 
 from ..core.files import write_figure
+from .path_constraints import draw_constraints
 from .registries import NOISE_MODELS
 from .solution import Solution
 
@@ -80,6 +81,7 @@ def plot_paths(solution: Solution):  # noqa: ANN201  (matplotlib Figure)
         ax.plot(*solution.p[0, i], "o", color=colour, mec="k", ms=8, zorder=5, label="start" if i == 0 else None)
         ax.plot(*solution.p[-1, i], "s", mfc="none", mec=colour, mew=2.2, ms=13, zorder=6,
                 label="end" if i == 0 else None)  # hollow: a process location under it stays visible  # fmt: skip
+    draw_constraints(ax, problem.constraints)
     ax.set_xlabel(f"x ({length})")
     ax.set_ylabel(f"y ({length})")
     ax.set_aspect("equal")

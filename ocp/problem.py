@@ -46,6 +46,7 @@ from ..core.config import (
 )
 from ..core.units import LengthUnit, PhysicalUnit, TimeUnit, UnitSystem
 from .noise_models import NoiseModel, parse_noise
+from .path_constraints import PathConstraints, check_initial_state
 from .registries import BVPSolverName, HomotopyModeName, MethodName, SchemeName, StrategyName
 
 __all__ = [
@@ -264,6 +265,9 @@ class Problem(StrictModel):
     process: Process = Field(description="the estimated process and its initial error covariance")
     sensors: list[Sensor] = Field(min_length=1, description="the mobile sensors (at least one)")
     cost: Cost = Field(description="weights of J = Tr[M Σ(tf)] + ∫ (α/2 |u|² + Tr[K Σ]) dt")
+    constraints: PathConstraints | None = Field(
+        None, description="path constraints of the sensors (direct method; docs/theory/path_constraints.md)"
+    )
     solver: SolverOptions = Field(SolverOptions(), description="how to solve (method, grid, homotopy, tolerances)")
 
     @model_validator(mode="after")
@@ -283,6 +287,14 @@ class Problem(StrictModel):
         if self.cost.K is not None:
             check_psd("cost.K", check_shape("cost.K", self.cost.K, (n, n)))
         names = [s.name for s in self.sensors]
+        if self.constraints is not None:
+            if self.solver.method != "direct":
+                raise InvalidValue(
+                    "constraints",
+                    f"expected no path constraints with solver.method {self.solver.method!r}: the indirect "
+                    "method has no state-constrained arcs; remove constraints or use method 'direct'",
+                )
+            check_initial_state(self.constraints, [s.p0 for s in self.sensors], [s.v0 for s in self.sensors])
         for i, sensor in enumerate(self.sensors):
             if names.index(sensor.name) != i:
                 raise InvalidValue(f"sensors[{i}].name", f"duplicate sensor name {sensor.name!r}")

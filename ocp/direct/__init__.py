@@ -17,5 +17,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "coasting_start": "mobisense.ocp.direct.guesses",
         "random_guess": "mobisense.ocp.direct.guesses",
         "clear_transcription_cache": "mobisense.ocp.direct.transcription",
+        "solution_sensitivities": "mobisense.ocp.direct.sensitivities",
+        "resimulate_sensors": "mobisense.ocp.direct.path_report",
     },
 )

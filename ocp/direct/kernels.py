@@ -99,7 +99,9 @@ class IntervalKernels:
         self.nn = self.ny if self.short_next else self.nx
         self.na = self.nx + self.nz + self.nn
         self.n_gap, self.n_path, self.n_bound = self.nn, self.d * self.ns, self.d * self.nb
-        self.nr = self.n_gap + self.n_path + self.n_bound
+        #: path-constraint rows g(x_r, P) ≤ 0 at the d nodes (docs/theory/path_constraints.md §2), last
+        self.n_cons = self.d * model.n_path_rows
+        self.nr = self.n_gap + self.n_path + self.n_bound + self.n_cons
         self.n_parameters = model.layout.size
         self.functions = self._interval_functions() | self._terminal_functions()
         self.k_nodes, self.k_pv = self._output_functions()
@@ -168,6 +170,7 @@ class IntervalKernels:
             quad += h * c.W[r] * L[0]
             energy += h * c.W[r] * L[1]
             bounds.append(m.control_bounds(nodes.u[r], P)[0])
+        cons = [m.path(nodes.x[r], P) for r in range(d)] if self.n_cons else []
         y_end_scaled = nodes.y_end / x_scale[ns:]
         nxt = a[self.nx + self.nz :]
         if self.short_next:
@@ -175,7 +178,7 @@ class IntervalKernels:
         else:
             sigma_end = sum(c.E[j] * nodes.sigma_scaled[j] for j in range(d + 1))
             gap = nxt - ca.vertcat(sigma_end, y_end_scaled)
-        return ca.vertcat(gap, *path, *bounds), quad / b["cost_scale"], energy
+        return ca.vertcat(gap, *path, *bounds, *cons), quad / b["cost_scale"], energy
 
     # ------------------------------------------------------------------ functions
     def _interval_functions(self) -> dict[str, ca.Function]:
@@ -217,7 +220,7 @@ class IntervalKernels:
     def _output_functions(self) -> tuple[ca.Function, ca.Function]:
         """``k_nodes(a, Ph) -> (x at nodes (nx, d), u at nodes (nu, d))`` and the costate helper ``k_pv``.
 
-        ``k_pv(a, Ph, λ_path) -> G (4N, d)``: the gradient of ``q + λ_path·(σ rows)`` with respect to the
+        ``k_pv(a, Ph, λ) -> G (4N, d)``: the gradient of ``q + λ·(σ rows, path-constraint rows)`` w.r.t. the
         scaled sensor states at the nodes, evaluated at their condensed values — what the multipliers of
         the eliminated sensor collocation equations must balance (eq. direct.12).
         """
@@ -228,8 +231,8 @@ class IntervalKernels:
         k_nodes = ca.Function("k_nodes", [a, Ph], [ca.horzcat(*nodes.x), ca.horzcat(*nodes.u)])
         y_nodes = ca.SX.sym("y_nodes", self.d * self.ny)
         rows, q, _ = self._rows(a, Ph, y_nodes)
-        lam_path = ca.SX.sym("lam_path", self.n_path)
-        path = rows[self.n_gap : self.n_gap + self.n_path]
+        lam_path = ca.SX.sym("lam_path", self.n_path + self.n_cons)
+        path = ca.vertcat(rows[self.n_gap : self.n_gap + self.n_path], rows[self.nr - self.n_cons :])
         grad = ca.gradient(q + ca.dot(lam_path, path), y_nodes)
         x_scale, _ = self.model.scales(P)
         condensed = ca.vertcat(*[x[self.ns :] / x_scale[self.ns :] for x in nodes.x])

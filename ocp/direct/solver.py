@@ -19,6 +19,7 @@ from ..problem import Problem
 from ..simulate import Trajectory, coast
 from ..solution import HomotopyStep, Solution, SolveStatus, StartKind
 from .guesses import initial_guess, state_grid
+from .path_report import constraint_report
 from .strategy import Continuation, SolveContext, run_strategy
 from .transcription import DirectCollocation, NLPResult, transcription_for
 
@@ -174,6 +175,9 @@ def _assemble(
         stats=stats,
         collocation=(tr.colloc.scheme, tr.colloc.degree, tr.intervals),
     )
+    if run.result is not None and tr.kernels.n_cons:
+        u_nodes = solution.u.reshape(tr.intervals, tr.colloc.degree, problem.N, 2)
+        solution.stats["constraints"] = constraint_report(problem, tr, run.result, P, u_nodes)
     if run.result is not None:
         solution.nlp = {
             "w": run.result.w,

@@ -20,7 +20,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from .. import collocation, model, noise_models, state_layout
+from .. import collocation, model, noise_models, path_constraints, state_layout
 from ..collocation import CollocationScheme
 from ..model import SensorKalmanModel, Structure
 from ..problem import Problem
@@ -199,7 +199,7 @@ class DirectCollocation:
         size = sum(f.n_instructions() for f in functions.values())
         if codegen == "off" or (codegen == "auto" and size > AUTO_COMPILE_INSTRUCTIONS):
             return functions, f"virtual machine (codegen {codegen}, {size} instructions)"
-        sources = [collocation, model, noise_models, state_layout, kernels_module]
+        sources = [collocation, model, noise_models, state_layout, kernels_module, path_constraints]
         sources += [NOISE_MODELS[name] for name in sorted(set(self.structure.noise_models))]
         digest = source_digest(sources)
         if digest is None:
@@ -259,6 +259,8 @@ class DirectCollocation:
         if k.n_bound:
             bound_rows = np.arange(K)[:, None] * k.nr + k.n_gap + k.n_path + np.arange(k.n_bound)
             lbg[bound_rows.ravel()] = -np.inf
+        if k.n_cons:
+            lbg[(np.arange(K)[:, None] * k.nr + k.nr - k.n_cons + np.arange(k.n_cons)).ravel()] = -np.inf
         for array in (lbw, ubw, lbg, ubg):
             array.setflags(write=False)
         return lbw, ubw, lbg, ubg
@@ -325,7 +327,12 @@ class DirectCollocation:
         x_scale, _ = self._scales(P)
         k, d = self.kernels, self.colloc.degree
         interval = np.concatenate(
-            [x_scale[-k.nn :], np.tile(x_scale[: k.ns], d), np.full(k.n_bound, float(b["control_scale"][0]) ** 2)]
+            [
+                x_scale[-k.nn :],
+                np.tile(x_scale[: k.ns], d),
+                np.full(k.n_bound, float(b["control_scale"][0]) ** 2),
+                np.tile(np.asarray(self.model.path_scale(P)).ravel(), d),
+            ]
         )
         terminal = [
             float(b["length_scale"][0]) if kind.startswith("terminal position") else float(b["velocity_scale"][0])
@@ -409,6 +416,7 @@ class DirectCollocation:
         mu = lam[:, : k.n_gap]  # multipliers of next_k − end_k (K, nn)
         lam_path = lam[:, k.n_gap : k.n_gap + k.n_path]
         nu_sigma = lam_path.reshape(K, d, ns)
+        lam_path = np.hstack([lam_path, lam[:, k.nr - k.n_cons :]])
         a, Ph = self._local(result.w, P)
         G = np.asarray(self._pv_gradient(a, Ph, lam_path.T)).reshape(ny, K, d).transpose(1, 2, 0)  # (K, d, ny)
         # eq. direct.12: D̂ ν − h ν F̃ = e μ_y − G per interval, F̃ nilpotent: ν = D̂⁻¹B + h D̂⁻² B F̃
@@ -439,6 +447,8 @@ class DirectCollocation:
                 labels += [(f"dynamics of {name} (collocation)", float(nodes[j, r])) for name in state[: k.ns]]
             for r in range(d):
                 labels += [(f"|u| ≤ u_max of sensor {sensor_names[i]}", float(nodes[j, r])) for i in bounded]
+            for r in range(d):
+                labels += [(what.format(*sensor_names), float(nodes[j, r])) for _, what in self.model.path_labels]
         labels += [(f"{kind} of sensor {sensor_names[i]}", float(starts[-1])) for kind, i in k.terminal_labels]
         return labels
 

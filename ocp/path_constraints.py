@@ -1,0 +1,350 @@
+"""Path constraints of the sensors: keep-out zones, separation, speed, workspace (docs/theory/path_constraints.md).
+
+The ``constraints`` section of a problem file::
+
+    constraints:
+      keep_out: [{center: [x, y], radius: r}, {polygon: [[x, y], ...]}]   # discs and convex polygons
+      min_separation: 1.0      # |p_i − p_j| ≥ d_min for every pair of sensors (L)
+      max_speed: 2.0           # |v_i| ≤ v_max (L/T)
+      workspace: {x: [xmin, xmax], y: [ymin, ymax]}
+
+Every number is an NLP parameter (blocks ``keepout_k``, ``min_separation``, ``max_speed``, ``workspace``);
+the structure (which constraints, how many vertices) is part of :class:`~mobisense.ocp.model.Structure`.
+:func:`path_rows` gives the scaled rows ``g ≤ 0`` of one collocation node (eq. path.1–path.5), enforced by
+the direct method at every collocation node; :func:`margins` the exact physical margins (numpy) used to
+check the re-simulated path between the nodes (:mod:`mobisense.ocp.path_report`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from pydantic import Field, model_validator
+
+from ..core.config import FiniteFloat, InvalidValue, PositiveFloat, StrictModel, Vector2
+
+__all__ = [
+    "KeepOutDisc",
+    "KeepOutPolygon",
+    "Workspace",
+    "PathConstraints",
+    "POLYGON_MARGIN",
+    "path_structure",
+    "path_parameter_blocks",
+    "path_parameter_values",
+    "path_rows",
+    "margins",
+    "group_names",
+    "check_initial_state",
+    "draw_constraints",
+]
+
+#: the smooth outside-of-polygon row is conservative by at most this fraction of √area (eq. path.2)
+POLYGON_MARGIN = 0.02
+
+
+class KeepOutDisc(StrictModel):
+    """A disc the sensors must stay out of: ``|p − c| ≥ r``."""
+
+    center: Vector2
+    radius: PositiveFloat
+
+
+class KeepOutPolygon(StrictModel):
+    """A convex polygon (vertices in order, either orientation) the sensors must stay out of."""
+
+    polygon: list[Vector2] = Field(min_length=3)
+
+    @model_validator(mode="after")
+    def _convex(self) -> KeepOutPolygon:
+        V = np.asarray(self.polygon, float)
+        e = np.roll(V, -1, axis=0) - V
+        cross = e[:, 0] * np.roll(e, -1, axis=0)[:, 1] - e[:, 1] * np.roll(e, -1, axis=0)[:, 0]
+        if np.any(np.abs(cross) <= 1e-12 * max(1.0, float(np.abs(V).max()) ** 2)) or not (
+            np.all(cross > 0) or np.all(cross < 0)
+        ):
+            raise InvalidValue(
+                "polygon", f"expected the vertices of a strictly convex polygon in order, got {self.polygon}"
+            )
+        return self
+
+    @property
+    def orientation(self) -> int:
+        """+1 counter-clockwise, −1 clockwise."""
+        V = np.asarray(self.polygon, float)
+        return 1 if np.sum(V[:, 0] * np.roll(V[:, 1], -1) - np.roll(V[:, 0], -1) * V[:, 1]) > 0 else -1
+
+
+class Workspace(StrictModel):
+    """The rectangle the sensors must stay in (L)."""
+
+    x: list[FiniteFloat] = Field(min_length=2, max_length=2)
+    y: list[FiniteFloat] = Field(min_length=2, max_length=2)
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Workspace:
+        for name in ("x", "y"):
+            lo, hi = getattr(self, name)
+            if not hi > lo:
+                raise InvalidValue(name, f"expected [min, max] with max > min, got [{lo:g}, {hi:g}]")
+        return self
+
+
+class PathConstraints(StrictModel):
+    """Constraints on the sensors' paths, enforced at every collocation node (direct method only)."""
+
+    keep_out: list[KeepOutDisc | KeepOutPolygon] = Field(default_factory=list)
+    min_separation: PositiveFloat | None = Field(None, description="smallest distance between two sensors (L)")
+    max_speed: PositiveFloat | None = Field(None, description="largest sensor speed |v_i| (L/T)")
+    workspace: Workspace | None = None
+
+
+# ---------------------------------------------------------------------- structure and parameters
+def path_structure(constraints: PathConstraints | None, n_sensors: int) -> tuple[tuple[Any, ...], ...]:
+    """The hashable shape of the constraints: ``("disc",)``, ``("polygon", m, ±1)``, ``("max_speed",)``, ...."""
+    if constraints is None:
+        return ()
+    out: list[tuple[Any, ...]] = []
+    for zone in constraints.keep_out:
+        out.append(("disc",) if isinstance(zone, KeepOutDisc) else ("polygon", len(zone.polygon), zone.orientation))
+    if constraints.min_separation is not None and n_sensors > 1:
+        out.append(("min_separation",))
+    if constraints.max_speed is not None:
+        out.append(("max_speed",))
+    if constraints.workspace is not None:
+        out.append(("workspace",))
+    return tuple(out)
+
+
+def group_names(structure: tuple[tuple[Any, ...], ...]) -> list[str]:
+    """The name of each constraint group: ``keep_out[k]``, ``min_separation``, ``max_speed``, ``workspace``."""
+    names, k = [], 0
+    for item in structure:
+        if item[0] in ("disc", "polygon"):
+            names.append(f"keep_out[{k}]")
+            k += 1
+        else:
+            names.append(item[0])
+    return names
+
+
+def path_parameter_blocks(structure: tuple[tuple[Any, ...], ...]) -> list[tuple[str, tuple[int, ...]]]:
+    """Parameter blocks of the constraints (appended to the :class:`~mobisense.ocp.model.ParameterLayout`)."""
+    blocks: list[tuple[str, tuple[int, ...]]] = []
+    for name, item in zip(group_names(structure), structure, strict=True):
+        kind = item[0]
+        if kind == "disc":
+            blocks.append((name, (3,)))  # cx, cy, r
+        elif kind == "polygon":
+            blocks.append((name, (item[1], 2)))
+        elif kind == "workspace":
+            blocks.append((name, (4,)))  # xmin, xmax, ymin, ymax
+        else:
+            blocks.append((name, (1,)))
+    return blocks
+
+
+def path_parameter_values(constraints: PathConstraints | None, n_sensors: int) -> dict[str, Any]:
+    """The numbers of the blocks of :func:`path_parameter_blocks`."""
+    structure = path_structure(constraints, n_sensors)
+    if not structure:
+        return {}
+    values: dict[str, Any] = {}
+    for k, zone in enumerate(constraints.keep_out):  # type: ignore[union-attr]
+        if isinstance(zone, KeepOutDisc):
+            values[f"keep_out[{k}]"] = [*zone.center, zone.radius]
+        else:
+            values[f"keep_out[{k}]"] = np.asarray(zone.polygon, float)
+    if ("min_separation",) in structure:
+        values["min_separation"] = constraints.min_separation  # type: ignore[union-attr]
+    if ("max_speed",) in structure:
+        values["max_speed"] = constraints.max_speed  # type: ignore[union-attr]
+    if ("workspace",) in structure:
+        w = constraints.workspace  # type: ignore[union-attr]
+        values["workspace"] = [*w.x, *w.y]
+    return values
+
+
+# ---------------------------------------------------------------------- the rows
+def _smooth_max(values: list[Any], s: Any) -> Any:
+    """Nested ``smax(a, b) = (a + b)/2 + √(((a − b)/2)² + s²)``: max ≤ smax ≤ max + (m − 1) s (eq. path.2)."""
+    out = values[0]
+    for v in values[1:]:
+        out = 0.5 * (out + v) + ca.sqrt((0.5 * (out - v)) ** 2 + s**2)
+    return out
+
+
+def _polygon_edges(V: Any, m: int, orientation: int) -> list[tuple[Any, Any]]:
+    """(vertex, outward unit normal) of each edge of a convex polygon (SX or numpy rows)."""
+    edges = []
+    for j in range(m):
+        a, b = V[j, :], V[(j + 1) % m, :]
+        e = b - a
+        length = ca.sqrt(e[0] ** 2 + e[1] ** 2) if isinstance(V, ca.SX) else float(np.hypot(*e))
+        normal = (
+            orientation * ca.horzcat(e[1], -e[0]) / length
+            if isinstance(V, ca.SX)
+            else orientation * np.array([e[1], -e[0]]) / length
+        )
+        edges.append((a, normal))
+    return edges
+
+
+def _polygon_area(V: Any, m: int) -> Any:
+    return 0.5 * ca.fabs(sum(V[j, 0] * V[(j + 1) % m, 1] - V[(j + 1) % m, 0] * V[j, 1] for j in range(m)))
+
+
+def path_rows(
+    positions: list[Any], velocities: list[Any], b: dict[str, Any], structure: tuple[tuple[Any, ...], ...]
+) -> tuple[list[Any], list[Any], list[tuple[str, str]]]:
+    """Scaled rows ``g ≤ 0`` of one instant (eq. path.1–path.5), the physical size of one unit of each, labels.
+
+    Parameters
+    ----------
+    positions, velocities : list of SX, each (2,)
+        Sensor positions (L) and velocities (L/T).
+    b : dict
+        Unpacked parameter blocks (see :func:`path_parameter_blocks`, plus ``length_scale``, ``velocity_scale``).
+    structure : tuple
+        :func:`path_structure`.
+
+    Returns
+    -------
+    rows : list of SX scalars
+    scales : list of SX scalars
+    labels : list of (group, description)
+    """
+    L, V = b["length_scale"], b["velocity_scale"]
+    N = len(positions)
+    rows: list[Any] = []
+    scales: list[Any] = []
+    labels: list[tuple[str, str]] = []
+    for name, item in zip(group_names(structure), structure, strict=True):
+        kind = item[0]
+        if kind == "disc":
+            c, r = b[name][:2], b[name][2]
+            for i, p in enumerate(positions):
+                rows.append((r**2 - ca.sumsqr(p - c)) / L**2)  # eq. path.1
+                labels.append((name, f"keep_out disc {name} of sensor {{{i}}}"))
+                scales.append(L**2)
+        elif kind == "polygon":
+            m, orientation = item[1], item[2]
+            Vx = b[name]
+            s = POLYGON_MARGIN * ca.sqrt(_polygon_area(Vx, m)) / (m - 1)
+            edges = _polygon_edges(Vx, m, orientation)
+            for i, p in enumerate(positions):
+                distances = [ca.dot(n.T, p - a.T) for a, n in edges]
+                rows.append(((m - 1) * s - _smooth_max(distances, s)) / L)  # eq. path.2
+                labels.append((name, f"keep_out polygon {name} of sensor {{{i}}}"))
+                scales.append(L)
+        elif kind == "min_separation":
+            dmin = b[name]
+            for i in range(N):
+                for j in range(i + 1, N):
+                    rows.append((dmin**2 - ca.sumsqr(positions[i] - positions[j])) / L**2)  # eq. path.3
+                    labels.append((name, f"min_separation of sensors {{{i}}} and {{{j}}}"))
+                    scales.append(L**2)
+        elif kind == "max_speed":
+            vmax = b[name]
+            for i, v in enumerate(velocities):
+                rows.append((ca.sumsqr(v) - vmax**2) / V**2)  # eq. path.4
+                labels.append((name, f"max_speed of sensor {{{i}}}"))
+                scales.append(V**2)
+        else:  # workspace, eq. path.5
+            w = b[name]
+            for i, p in enumerate(positions):
+                for row, what in (
+                    (w[0] - p[0], "x ≥ xmin"),
+                    (p[0] - w[1], "x ≤ xmax"),
+                    (w[2] - p[1], "y ≥ ymin"),
+                    (p[1] - w[3], "y ≤ ymax"),
+                ):
+                    rows.append(row / L)
+                    labels.append((name, f"workspace {what} of sensor {{{i}}}"))
+                    scales.append(L)
+    return rows, scales, labels
+
+
+def margins(constraints: PathConstraints, p: np.ndarray, v: np.ndarray) -> dict[str, np.ndarray]:
+    """Exact physical violation of each constraint group at each time (> 0: violated), numpy.
+
+    Parameters
+    ----------
+    constraints : PathConstraints
+    p, v : ndarray, shape (T, N, 2)
+        Positions (L) and velocities (L/T).
+
+    Returns
+    -------
+    dict
+        Group name -> violation (T,): penetration depth into a zone (L), separation deficit (L),
+        speed excess (L/T), distance outside the workspace (L).
+    """
+    out: dict[str, np.ndarray] = {}
+    N = p.shape[1]
+    for k, zone in enumerate(constraints.keep_out):
+        if isinstance(zone, KeepOutDisc):
+            depth = zone.radius - np.linalg.norm(p - np.asarray(zone.center), axis=2)
+        else:
+            Vx = np.asarray(zone.polygon, float)
+            edges = _polygon_edges(Vx, len(Vx), zone.orientation)
+            depth = -np.max([(p - a) @ n for a, n in edges], axis=0)
+        out[f"keep_out[{k}]"] = depth.max(axis=1)
+    if constraints.min_separation is not None and N > 1:
+        gaps = [np.linalg.norm(p[:, i] - p[:, j], axis=1) for i in range(N) for j in range(i + 1, N)]
+        out["min_separation"] = constraints.min_separation - np.min(gaps, axis=0)
+    if constraints.max_speed is not None:
+        out["max_speed"] = np.linalg.norm(v, axis=2).max(axis=1) - constraints.max_speed
+    if constraints.workspace is not None:
+        w = constraints.workspace
+        outside = np.maximum.reduce([w.x[0] - p[..., 0], p[..., 0] - w.x[1], w.y[0] - p[..., 1], p[..., 1] - w.y[1]])
+        out["workspace"] = outside.max(axis=1)
+    return out
+
+
+def check_initial_state(constraints: PathConstraints, p0: list[list[float]], v0: list[list[float]]) -> None:
+    """Raise :class:`InvalidValue` (key path of the offending sensor) if the initial state violates a constraint."""
+    p = np.asarray(p0, float)[None]
+    v = np.asarray(v0, float)[None]
+    for name, violation in margins(constraints, p, v).items():
+        if violation[0] > 0:
+            field = "v0" if name == "max_speed" else "p0"
+            i = _offending_sensor(constraints, name, p[0], v[0])
+            raise InvalidValue(
+                f"sensors[{i}].{field}",
+                f"expected an initial state satisfying constraints.{name} (violated by {violation[0]:.3g})",
+            )
+
+
+def _offending_sensor(constraints: PathConstraints, name: str, p: np.ndarray, v: np.ndarray) -> int:
+    if name == "min_separation":
+        return 0
+    for i in range(p.shape[0]):
+        single = PathConstraints(**{**constraints.model_dump(), "min_separation": None})
+        if margins(single, p[None, i : i + 1], v[None, i : i + 1]).get(name, np.zeros(1))[0] > 0:
+            return i
+    return 0
+
+
+def draw_constraints(ax: Any, constraints: PathConstraints | None) -> None:
+    """Draw keep-out zones (hatched) and the workspace (dashed) on a matplotlib axis of the plane."""
+    if constraints is None:
+        return
+    from matplotlib.patches import Circle, Polygon, Rectangle
+
+    style = {"facecolor": "0.55", "edgecolor": "k", "alpha": 0.6, "hatch": "//", "zorder": 3}
+    for k, zone in enumerate(constraints.keep_out):
+        label = "keep-out zones" if k == 0 else None
+        if isinstance(zone, KeepOutDisc):
+            ax.add_patch(Circle(tuple(zone.center), zone.radius, label=label, **style))
+        else:
+            ax.add_patch(Polygon(np.asarray(zone.polygon), closed=True, label=label, **style))
+    if constraints.workspace is not None:
+        w = constraints.workspace
+        ax.add_patch(
+            Rectangle(
+                (w.x[0], w.y[0]), w.x[1] - w.x[0], w.y[1] - w.y[0], fill=False, ls="--", ec="k", label="workspace"
+            )
+        )

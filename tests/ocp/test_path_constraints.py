@@ -1,0 +1,122 @@
+"""Path constraints (docs/theory/path_constraints.md): schema, exact re-simulation, and the direct optimum."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+from reference_problems import PROBLEMS
+
+from mobisense import cli
+from mobisense.ocp.direct.path_report import resimulate_sensors
+from mobisense.ocp.direct.solver import solve_direct
+from mobisense.ocp.path_constraints import PathConstraints, margins
+from mobisense.ocp.problem import Problem
+
+
+def base(intervals: int = 30, **extra) -> dict:
+    data = yaml.safe_load((PROBLEMS / "hussein2008.yaml").read_text())
+    data["solver"]["collocation"]["intervals"] = intervals
+    data.update(extra)
+    return data
+
+
+def test_margins_are_the_exact_distances() -> None:
+    c = PathConstraints(
+        keep_out=[{"center": [0.0, 0.0], "radius": 2.0}, {"polygon": [[3, -1], [5, -1], [5, 1], [3, 1]]}],
+        max_speed=1.0,
+        workspace={"x": [-10, 10], "y": [-10, 10]},
+    )
+    p = np.array([[[1.0, 0.0]], [[4.5, 0.0]], [[12.0, 0.0]]])
+    v = np.array([[[3.0, 4.0]], [[0.0, 0.0]], [[0.0, 0.5]]])
+    m = margins(c, p, v)
+    np.testing.assert_allclose(m["keep_out[0]"], [1.0, -2.5, -10.0])
+    np.testing.assert_allclose(m["keep_out[1]"], [-2.0, 0.5, -7.0])  # depth inside the square: 0.5 to the x = 5 edge
+    np.testing.assert_allclose(m["max_speed"], [4.0, -1.0, -0.5])
+    np.testing.assert_allclose(m["workspace"], [-9.0, -5.5, 2.0])
+
+
+def test_resimulation_is_exact_for_a_constant_control() -> None:
+    problem = Problem.from_dict(base())
+    K, d = 7, 3
+    u = np.tile(np.array([0.3, -0.2]), (K, d, 1, 1))
+    t, p, v = resimulate_sensors(problem, u, "radau", d, per_interval=5)
+    p0, v0 = np.array([10.0, 10.0]), np.array([0.0, -2.0])
+    # double integrator under a constant control: p = p0 + v0 t + u t²/2 (rounding only)
+    np.testing.assert_allclose(p[:, 0], p0 + np.outer(t, v0) + 0.5 * np.outer(t**2, [0.3, -0.2]), atol=1e-12)
+    np.testing.assert_allclose(v[:, 0], v0 + np.outer(t, [0.3, -0.2]), atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "edit, key",
+    [
+        ({"constraints": {"keep_out": [{"polygon": [[0, 0], [2, 0], [0.5, 0.5], [0, 2]]}]}}, "keep_out"),
+        ({"constraints": {"keep_out": [{"center": [10.0, 10.0], "radius": 1.0}]}}, "sensors[0].p0"),
+        ({"constraints": {"max_speed": 1.0}}, "sensors[0].v0"),
+        ({"constraints": {"workspace": {"x": [1, 0], "y": [0, 1]}}}, "constraints.workspace.x"),
+        ({"constraints": {"max_speed": 3.0}, "solver": {"method": "indirect"}}, "constraints"),
+    ],
+)
+def test_bad_constraints_exit_2_with_the_key_path(tmp_path, capsys, edit, key) -> None:
+    data = base()
+    solver = edit.pop("solver", None)
+    data.update(edit)
+    if solver:
+        data["solver"].update(solver)
+    path = tmp_path / "p.yaml"
+    path.write_text(yaml.safe_dump(data))
+    out = tmp_path / "out"
+    assert cli.main(["solve", str(path), "--out", str(out)]) == 2
+    assert key in capsys.readouterr().err
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_a_disc_across_the_path_is_skirted_tangentially_and_costs_more() -> None:
+    free = solve_direct(Problem.from_dict(base()))
+    mid = free.p[len(free.t) // 2, 0]
+    radius = 1.0
+    data = base(constraints={"keep_out": [{"center": mid.tolist(), "radius": radius}]})
+    solution = solve_direct(Problem.from_dict(data))
+    assert solution.success
+    report = solution.stats["constraints"]["keep_out[0]"]
+    assert report["active"] and report["max_multiplier"] > 0
+    dist = np.linalg.norm(solution.p[:, 0] - mid, axis=1)
+    # at the nodes the constraint holds to Ipopt's tolerance (1e-9 on scaled rows of size L²·1e-9)
+    assert dist.min() >= radius - 1e-6
+    # tangent where active: at the closest node the velocity is perpendicular to the radius (|cos| ≤ 0.05:
+    # the node spacing h = 1/3 T lets the contact point sit between nodes)
+    j = int(np.argmin(dist))
+    radial = (solution.p[j, 0] - mid) / dist[j]
+    assert abs(radial @ solution.v[j, 0]) / np.linalg.norm(solution.v[j, 0]) < 0.05
+    assert solution.cost >= free.cost * (1 - 1e-9)  # a subset of the feasible set cannot cost less
+    # between the nodes the re-simulated path may cut the arc by O(h² |v|²/r): a few mm here
+    assert report["max_violation"] < 0.02 * radius
+
+
+@pytest.mark.slow
+def test_separation_holds_for_two_sensors_converging_and_inactive_multipliers_vanish() -> None:
+    data = yaml.safe_load((PROBLEMS / "separation.yaml").read_text())
+    data["solver"]["collocation"]["intervals"] = 30
+    free_data = {**data, "constraints": None}
+    free = solve_direct(Problem.from_dict(free_data))
+    gap_free = np.linalg.norm(free.p[:, 0] - free.p[:, 1], axis=1).min()
+    assert gap_free < 1.0  # unconstrained, the two sensors close in on the process
+    solution = solve_direct(Problem.from_dict(data))
+    assert solution.success
+    gap = np.linalg.norm(solution.p[:, 0] - solution.p[:, 1], axis=1)
+    assert gap.min() >= 1.5 - 1e-6
+    assert solution.cost >= free.cost
+    nlp = solution.nlp
+    from mobisense.ocp.direct.transcription import transcription_for
+
+    tr = transcription_for(solution.problem)
+    k = tr.kernels
+    _, p_nodes, v_nodes = tr.structure.state.split(tr.unpack(nlp["w"], nlp["P"])["xc"].reshape(-1, tr.structure.nx))
+    rows = margins(solution.problem.constraints, p_nodes, v_nodes)["min_separation"]  # one row per node
+    lam = nlp["lam_g"][: tr.intervals * k.nr].reshape(tr.intervals, k.nr)[:, k.nr - k.n_cons :].ravel()
+    inactive = rows < -0.1  # at least 0.1 L from the bound
+    assert inactive.any() and (~inactive).any()
+    # complementarity λ|g| ≈ μ ≤ 1e-9 at Ipopt's tol: 0.1 L away (|g| ≳ 0.1 scaled) λ ≤ 1e-8, ≤ 1e-6 of the active
+    assert np.abs(lam[inactive]).max() <= 1e-6 * np.abs(lam).max()
+    assert (lam[~inactive] >= -1e-12).all()
