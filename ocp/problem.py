@@ -43,8 +43,12 @@ from ..core.config import (
     parse_config,
 )
 from ..core.units import LengthUnit, PhysicalUnit, TimeUnit, UnitSystem
+from .field import FieldSpec
 from .noise_models import NoiseModel, parse_noise
 from .registries import BVPSolverName, HomotopyModeName, MethodName, SchemeName
+
+#: A field problem with more states than this is refused by the methods that carry Σ as variables.
+MAX_DIRECT_FIELD_STATES = 9
 
 __all__ = [
     "Units",
@@ -56,6 +60,7 @@ __all__ = [
     "CollocationOptions",
     "HomotopyOptions",
     "BVPOptions",
+    "ShootingOptions",
     "SolverOptions",
     "Problem",
     "load_problem",
@@ -94,16 +99,29 @@ class Horizon(StrictModel):
 
 
 class Process(StrictModel):
-    """The process ``x' = A x + B w``, ``E[w w'] = Q``, its initial error covariance and locations."""
+    """The process ``x' = A x + B w``, ``E[w w'] = Q``, its initial error covariance and locations.
 
-    A: Matrix = Field(description="n×n state matrix of x' = A x + B w (1/T)")
-    B: Matrix = Field(description="n×m noise input matrix")
-    Q: Matrix = Field(description="m×m intensity of the white process noise w (symmetric, PSD)")
-    Sigma0: Matrix = Field(description="n×n initial error covariance (symmetric positive definite)")
-    locations: list[Vector2] = Field(description="one planar location per state (L)")
+    Either the explicit matrices or ``field`` (a gridded random field, :class:`~mobisense.ocp.field.FieldSpec`,
+    from which A, B, Q, Σ0 and the locations are derived: docs/theory/field.md §1).
+    """
+
+    A: Matrix | None = Field(None, description="n×n state matrix of x' = A x + B w (1/T)")
+    B: Matrix | None = Field(None, description="n×m noise input matrix")
+    Q: Matrix | None = Field(None, description="m×m intensity of the white process noise w (symmetric, PSD)")
+    Sigma0: Matrix | None = Field(None, description="n×n initial error covariance (symmetric positive definite)")
+    locations: list[Vector2] | None = Field(None, description="one planar location per state (L)")
+    field: FieldSpec | None = Field(None, description="a gridded random field instead of the matrices")
 
     @model_validator(mode="after")
     def _shapes(self) -> Process:
+        explicit = [k for k in ("A", "B", "Q", "Sigma0", "locations") if getattr(self, k) is not None]
+        if self.field is not None:
+            if explicit:
+                raise InvalidValue(explicit[0], "expected no explicit matrices with process.field (they are derived)")
+            return self
+        for key in ("A", "B", "Q", "Sigma0", "locations"):
+            if getattr(self, key) is None:
+                raise InvalidValue(key, "expected the matrices A, B, Q, Sigma0, locations, or a field block")
         A = check_square("A", self.A)
         n = A.shape[0]
         m = np.asarray(self.B).shape[1]
@@ -117,7 +135,13 @@ class Process(StrictModel):
     @property
     def n_states(self) -> int:
         """Number of process states n."""
-        return len(self.A)
+        return self.field.n if self.field is not None else len(self.A)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """A (n,n), B (n,m), Q (m,m), Sigma0 (n,n), locations (n,2) as float arrays (derived for a field)."""
+        if self.field is not None:
+            return self.field.process().matrices()
+        return {k: np.asarray(getattr(self, k), float) for k in ("A", "B", "Q", "Sigma0", "locations")}
 
 
 class Terminal(StrictModel):
@@ -136,17 +160,39 @@ class Sensor(StrictModel):
     noise: Annotated[SerializeAsAny[NoiseModel], BeforeValidator(parse_noise)] = Field(
         description="measurement-noise model {model: NAME, parameters…}: variance as a function of position"
     )
-    measures: Matrix | None = Field(default=None, description="rows of C_i (default: every state)")
+    measures: Matrix | Literal["point"] | None = Field(
+        default=None,
+        description="rows of C_i (default: every state), or 'point': the field value at the sensor's position "
+        "(kriging row c(p), needs process.field; docs/theory/field.md §2)",
+    )
     terminal: Terminal | None = Field(None, description="fixed terminal position and/or velocity (default: free)")
     u_max: PositiveFloat | None = Field(default=None, description="bound on |u_i| (L/T^2)")
 
 
-class Cost(StrictModel):
-    """Cost weights: ``J = Tr[M Σ(tf)] + ∫ (alpha/2 |u|^2 + Tr[K Σ]) dt``."""
+#: named weight matrices: ``mean`` = I/n (the mean error variance), ``sum`` = I (the trace), ``zero``
+WeightName = Literal["mean", "sum", "zero"]
 
-    M: Matrix = Field(description="n×n terminal weight of Tr[M Σ(tf)] (symmetric positive definite)")
-    K: Matrix | None = Field(None, description="n×n running weight of ∫ Tr[K Σ] dt (symmetric PSD; default 0)")
+
+class Cost(StrictModel):
+    """Cost weights: ``J = Tr[M Σ(tf)] + ∫ (alpha/2 |u|^2 + Tr[K Σ]) dt``.
+
+    M and K are matrices or names: ``mean`` (I/n), ``sum`` (I), ``zero`` (K only).
+    """
+
+    M: Matrix | WeightName = Field(description="n×n terminal weight (SPD), or 'mean' (I/n) / 'sum' (I)")
+    K: Matrix | WeightName | None = Field(None, description="n×n running weight (PSD; default 0), or a name")
     alpha: PositiveFloat = Field(description="control weight α of ∫ α/2 |u|² dt")
+
+    def weight(self, key: str, n: int) -> np.ndarray:
+        """Weight ``key`` ("M" or "K") as an (n, n) array."""
+        value = getattr(self, key)
+        if value is None or value == "zero":
+            return np.zeros((n, n))
+        if value == "mean":
+            return np.eye(n) / n
+        if value == "sum":
+            return np.eye(n)
+        return np.asarray(value, float)
 
 
 class CollocationOptions(StrictModel):
@@ -192,11 +238,38 @@ class BVPOptions(StrictModel):
     )
 
 
+class ShootingOptions(StrictModel):
+    """Reduced-space shooting for field problems (docs/theory/field.md §3): only the controls are NLP variables.
+
+    The ε-homotopy runs on ``coarse_intervals``, then one ε = 1 solve on ``intervals`` from its controls.
+    """
+
+    intervals: int = Field(100, ge=2, le=10_000, description="K control intervals of the final solve")
+    coarse_intervals: int = Field(25, ge=2, le=10_000, description="intervals of the ε-homotopy")
+    substeps: int | None = Field(None, ge=1, le=1000, description="RK4 steps per interval (default: h·λ ≤ 0.25)")
+    memory: int = Field(30, ge=2, le=500, description="L-BFGS history length")
+    homotopy: list[float] = Field([0.03, 0.1, 0.2, 0.4, 0.7, 1.0], min_length=1, description="coarse ε schedule")
+    homotopy_tolerance: float = Field(1e-5, gt=0.0, lt=1.0, description="Ipopt tol of the coarse steps")
+    coarse_max_iterations: int = Field(300, ge=1, description="Ipopt iterations per coarse step")
+    full_sigma: bool | None = Field(None, description="write the full Σ(t) to solution.nc (default: n <= 25)")
+
+    @model_validator(mode="after")
+    def _schedule(self) -> ShootingOptions:
+        eps = self.homotopy
+        increasing = all(b > a for a, b in zip(eps, eps[1:], strict=False))
+        if any(not 0 < e <= 1 for e in eps) or not increasing or eps[-1] != 1.0:
+            raise InvalidValue("homotopy", f"expected increasing ε in (0, 1] ending at 1, got {eps}")
+        return self
+
+
 class SolverOptions(StrictModel):
     """How to solve: method, transcription, homotopy and Ipopt tolerances."""
 
-    method: MethodName = Field("direct", description="direct collocation, indirect (PMP) or both")
+    method: MethodName = Field(
+        "direct", description="direct collocation, indirect (PMP), both, or shooting (default for a field)"
+    )
     collocation: CollocationOptions = CollocationOptions()
+    shooting: ShootingOptions = ShootingOptions()
     homotopy: HomotopyOptions = HomotopyOptions()
     bvp: BVPOptions = BVPOptions()
     tolerance: float = Field(1e-9, gt=0.0, lt=1e-2, description="Ipopt tol (scaled NLP error)")
@@ -219,21 +292,33 @@ class Problem(StrictModel):
     @model_validator(mode="after")
     def _cross_checks(self) -> Problem:
         n = self.process.n_states
-        check_spd("cost.M", check_shape("cost.M", self.cost.M, (n, n)))
-        if self.cost.K is not None:
-            check_psd("cost.K", check_shape("cost.K", self.cost.K, (n, n)))
+        field = self.process.field
+        if field is not None and "method" not in self.solver.model_fields_set:
+            self.solver.method = "shooting"  # docs/theory/field.md §3.4: the scalable method for a field
+        method = self.solver.method
+        if method == "shooting" and field is None:
+            raise InvalidValue("solver.method", "expected process.field with method 'shooting' (the O(n²N) "
+                               "propagation needs the field structure A = −I/τ, Q ∝ Kₛ)")  # fmt: skip
+        for key in ("M", "K"):
+            if isinstance(getattr(self.cost, key), list):
+                check = check_spd if key == "M" else check_psd
+                check(f"cost.{key}", check_shape(f"cost.{key}", getattr(self.cost, key), (n, n)))
+        if self.cost.M == "zero":
+            raise InvalidValue("cost.M", "expected a positive definite terminal weight, not 'zero'")
         names = [s.name for s in self.sensors]
         for i, sensor in enumerate(self.sensors):
             if names.index(sensor.name) != i:
                 raise InvalidValue(f"sensors[{i}].name", f"duplicate sensor name {sensor.name!r}")
-            if sensor.u_max is not None and self.solver.method != "direct":
+            if sensor.u_max is not None and method in ("indirect", "both"):
                 raise InvalidValue(
                     f"sensors[{i}].u_max",
-                    f"expected no control bound with solver.method {self.solver.method!r} (got {sensor.u_max:g}): "
+                    f"expected no control bound with solver.method {method!r} (got {sensor.u_max:g}): "
                     "the indirect method's control law would be a non-smooth saturation; "
                     "remove u_max or use method 'direct'",
                 )
-            if sensor.measures is not None:
+            if sensor.measures == "point":
+                self._check_point_sensor(i, sensor)
+            elif sensor.measures is not None:
                 rows = np.asarray(sensor.measures, dtype=float)
                 if rows.shape[1] != n:
                     raise InvalidValue(
@@ -241,7 +326,27 @@ class Problem(StrictModel):
                     )
                 if np.any(np.all(rows == 0.0, axis=1)):
                     raise InvalidValue(f"sensors[{i}].measures", "expected no all-zero row")
+            elif method == "shooting":
+                raise InvalidValue(f"sensors[{i}].measures", "expected 'point' with method 'shooting'")
+        if field is not None and method in ("direct", "indirect", "both") and n > MAX_DIRECT_FIELD_STATES:
+            raise InvalidValue(
+                "solver.method",
+                f"expected method 'shooting' for a field of n = {n} > {MAX_DIRECT_FIELD_STATES} states: "
+                f"'{method}' carries the n(n+1)/2 = {n * (n + 1) // 2} entries of Σ as variables "
+                "(measured > 10 GB at n = 9; docs/theory/field.md §3.4)",
+            )
         return self
+
+    def _check_point_sensor(self, i: int, sensor: Sensor) -> None:
+        if self.process.field is None:
+            raise InvalidValue(f"sensors[{i}].measures", "expected process.field with 'point' (the kriging rows "
+                               "interpolate the field between its states)")  # fmt: skip
+        if sensor.noise.model != "constant":
+            raise InvalidValue(f"sensors[{i}].noise.model", "expected 'constant' with measures: point (the noise of "
+                               "a range-dependent model would be evaluated at distance 0)")  # fmt: skip
+        if self.solver.method in ("indirect", "both"):
+            raise InvalidValue("solver.method", "expected 'direct' or 'shooting' with point sensors (the indirect "
+                               "method has no kriging rows yet)")  # fmt: skip
 
     # ------------------------------------------------------------------ numeric accessors
     @property
@@ -256,21 +361,28 @@ class Problem(StrictModel):
 
     def matrices(self) -> dict[str, np.ndarray]:
         """Numeric problem data: A (n,n), BQB' (n,n), Sigma0 (n,n), M (n,n), K (n,n), locations (n,2)."""
-        A = np.asarray(self.process.A, float)
-        B = np.asarray(self.process.B, float)
-        Q = np.asarray(self.process.Q, float)
-        K = np.zeros((self.n, self.n)) if self.cost.K is None else np.asarray(self.cost.K, float)
+        a = self.process.arrays()
         return {
-            "A": A,
-            "BQB": B @ Q @ B.T,
-            "Sigma0": np.asarray(self.process.Sigma0, float),
-            "M": np.asarray(self.cost.M, float),
-            "K": K,
-            "locations": np.asarray(self.process.locations, float),
+            "A": a["A"],
+            "BQB": a["B"] @ a["Q"] @ a["B"].T,
+            "Sigma0": a["Sigma0"],
+            "M": self.cost.weight("M", self.n),
+            "K": self.cost.weight("K", self.n),
+            "locations": a["locations"],
         }
 
+    def is_point(self, i: int) -> bool:
+        """Whether sensor ``i`` measures the field at its own position (``measures: point``)."""
+        return self.sensors[i].measures == "point"
+
     def measurement_rows(self, i: int) -> np.ndarray:
-        """Rows of C_i for sensor ``i``, shape (m_i, n); default the identity (every state)."""
+        """Rows of C_i for sensor ``i``, shape (m_i, n); default the identity (every state).
+
+        A point sensor's row is the kriging row c(p0)' at its initial position (eq. field.3); the models
+        evaluate c(p) along the path.
+        """
+        if self.is_point(i):
+            return self.process.field.process().weights(np.asarray(self.sensors[i].p0, float)[None, :])
         measures = self.sensors[i].measures
         return np.eye(self.n) if measures is None else np.asarray(measures, float)
 
@@ -280,6 +392,8 @@ class Problem(StrictModel):
         A row c measures the states it weights; its location is the |c|-weighted mean of those states'
         locations (for a unit row e_j this is exactly s_j, the paper's case).
         """
+        if self.is_point(i):
+            return np.asarray(self.sensors[i].p0, float)[None, :]
         rows = np.abs(self.measurement_rows(i))
         return (rows @ self.matrices()["locations"]) / rows.sum(axis=1, keepdims=True)
 
