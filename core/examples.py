@@ -29,6 +29,8 @@ EXAMPLES: tuple[Example, ...] = (
     Example("hussein2008_paper", "solve", "the same solved as the paper did: indirect, ε steps, bvp4c defaults"),
     Example("coupled_two_sensor", "solve", "coupled correlated 2-state process, two sensors; one must stop at tf"),
     Example("terminal_and_bound", "solve", "the default example with a rendezvous at (2, -2) at rest and |u| <= 1.5"),
+    Example("field_mapping_5x5", "solve", "four gliders map a 5 × 5 correlated field (25 states, shooting)"),
+    Example("field_mapping_10x10", "solve", "four gliders map a 10 × 10 correlated field (100 states, shooting)"),
     Example("sweep_hussein2008", "sweep", "sweep of the default example over the control weight and the start"),
     Example("formation_cross", "steady-state", "cross formation: steady-state covariance minimised on a bound"),
     Example("formation_cross_equal_sides", "steady-state", "the cross formation with a = b imposed (a saddle)"),

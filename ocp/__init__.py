@@ -40,6 +40,11 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "solve_both": "mobisense.ocp.compare",
         "agreement": "mobisense.ocp.compare",
         "save_figures": "mobisense.ocp.plots",
+        "FieldSpec": "mobisense.ocp.field",
+        "FieldProcess": "mobisense.ocp.field",
+        "FieldShooting": "mobisense.ocp.shooting",
+        "solve_shooting": "mobisense.ocp.field_solve",
+        "shooting_memory_bytes": "mobisense.ocp.field",
         "effective_noise": "mobisense.ocp.plots",
     },
 )

@@ -18,36 +18,7 @@ from .problem import Problem
 from .shooting import FieldShooting
 from .solution import HomotopyStep, Solution, SolveStatus
 
-__all__ = ["solve_shooting", "shooting_memory_bytes", "MEMORY_LIMIT_BYTES"]
-
-#: The largest estimated working set of a shooting solve (the issue's 4 GB target for n = 100).
-MEMORY_LIMIT_BYTES = 4 * 1024**3
-
-
-def shooting_memory_bytes(problem: Problem) -> int:
-    """Estimated peak memory (bytes) of the fine shooting NLP: 8 n² (K+1)(4m+2) + 3 dense n × n.
-
-    The adjoint sweep keeps every interval's whitened Z and, per substep, about four n × n temporaries
-    (measured at n = 100, K = 100, m = 2: 85 MB above the interpreter's 95 MB; this formula gives 81 MB).
-    """
-    from .shooting import substeps_for
-
-    n, o = problem.n, problem.solver.shooting
-    m = o.substeps or substeps_for(problem, o.intervals)
-    return 8 * n * n * ((o.intervals + 1) * (4 * m + 2) + 3)
-
-
-def check_size(problem: Problem) -> None:
-    """Refuse (``ConfigError``, one line) a shooting problem whose working set exceeds the limit."""
-    need = shooting_memory_bytes(problem)
-    if need > MEMORY_LIMIT_BYTES:
-        o = problem.solver.shooting
-        raise ConfigError(
-            f"process.field.grid: n = {problem.n} states on K = {o.intervals} intervals need about "
-            f"{need / 1024**3:.1f} GB (limit {MEMORY_LIMIT_BYTES / 1024**3:.0f} GB); "
-            "use a coarser grid or fewer intervals"
-        )
-
+__all__ = ["solve_shooting"]
 
 def solve_shooting(
     problem: Problem,
@@ -74,7 +45,6 @@ def solve_shooting(
     """
     if problem.process.field is None:
         raise ConfigError("solver.method: expected process.field with method 'shooting'")
-    check_size(problem)
     started = time.perf_counter()
     o, tol = problem.solver.shooting, problem.solver.tolerance
     fine = FieldShooting(problem, o.intervals, o.substeps)

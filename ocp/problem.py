@@ -43,7 +43,7 @@ from ..core.config import (
     parse_config,
 )
 from ..core.units import LengthUnit, PhysicalUnit, TimeUnit, UnitSystem
-from .field import FieldSpec
+from .field import SHOOTING_MEMORY_LIMIT, FieldSpec, shooting_memory_bytes, shooting_substeps
 from .noise_models import NoiseModel, parse_noise
 from .registries import BVPSolverName, HomotopyModeName, MethodName, SchemeName
 
@@ -328,6 +328,8 @@ class Problem(StrictModel):
                     raise InvalidValue(f"sensors[{i}].measures", "expected no all-zero row")
             elif method == "shooting":
                 raise InvalidValue(f"sensors[{i}].measures", "expected 'point' with method 'shooting'")
+        if method == "shooting":
+            self._check_shooting_size()
         if field is not None and method in ("direct", "indirect", "both") and n > MAX_DIRECT_FIELD_STATES:
             raise InvalidValue(
                 "solver.method",
@@ -336,6 +338,21 @@ class Problem(StrictModel):
                 "(measured > 10 GB at n = 9; docs/theory/field.md §3.4)",
             )
         return self
+
+    def _check_shooting_size(self) -> None:
+        """Refuse, before anything of size n² is allocated, a shooting NLP larger than the memory limit."""
+        o, n = self.solver.shooting, self.n
+        noise = [s.noise.parameters()[0] for s in self.sensors if s.noise.model == "constant"]
+        if len(noise) != self.N:
+            return  # refused per sensor below
+        m = o.substeps or shooting_substeps(self.process.field, noise, self.horizon.tf - self.horizon.t0, o.intervals)
+        need = shooting_memory_bytes(n, o.intervals, m)
+        if need > SHOOTING_MEMORY_LIMIT:
+            raise InvalidValue(
+                "solver.shooting.intervals",
+                f"n = {n} states on K = {o.intervals} intervals (m = {m} substeps) need about {need / 1024**3:.1f} GB, "
+                f"more than {SHOOTING_MEMORY_LIMIT / 1024**3:.0f} GB; use a coarser grid or fewer intervals",
+            )
 
     def _check_point_sensor(self, i: int, sensor: Sensor) -> None:
         if self.process.field is None:

@@ -21,6 +21,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from .field import shooting_substeps
 from .mobius import mobius_rk4_step
 from .problem import Problem
 
@@ -28,17 +29,9 @@ __all__ = ["ShootingTrajectory", "FieldShooting", "substeps_for"]
 
 
 def substeps_for(problem: Problem, intervals: int, max_h_lambda: float = 0.25) -> int:
-    """Möbius-RK4 steps per interval so that h·λ_max ≤ ``max_h_lambda`` (docs/theory/field.md §3.3).
-
-    λ_max = sqrt(a² + 2a Σ_i σ²/r_i) (a = 1/τ) bounds the eigenvalues of the linear Hamiltonian system
-    for every sensor configuration (c̃'c̃ = k'Kₛ⁻¹k ≤ σ²). 0.25 is an accuracy target: cost error
-    9e-8 relative at K = 100 (m = 2) against 1.2e-6 at m = 1.
-    """
-    spec = problem.process.field
-    a = 1.0 / spec.time_constant
-    info = sum(spec.kernel.variance / s.noise.parameters()[0] for s in problem.sensors)
-    h = (problem.horizon.tf - problem.horizon.t0) / intervals
-    return max(1, math.ceil(h * math.sqrt(a * a + 2.0 * a * info) / max_h_lambda - 1e-9))
+    """Substeps of :func:`~mobisense.ocp.field.shooting_substeps` for ``problem`` on ``intervals``."""
+    return shooting_substeps(problem.process.field, [s.noise.parameters()[0] for s in problem.sensors],
+                             problem.horizon.tf - problem.horizon.t0, intervals, max_h_lambda)  # fmt: skip
 
 
 @dataclass
