@@ -16,7 +16,7 @@ import numpy as np
 from ..core.config import ConfigError
 from .problem import Problem
 from .shooting import FieldShooting
-from .solution import HomotopyStep, Solution, SolveStatus
+from .solution import HomotopyStep, Solution, SolveStatus, StartKind
 
 __all__ = ["solve_shooting"]
 
@@ -65,12 +65,12 @@ def solve_shooting(
             progress(step)
         return step.success
 
-    start = "warm start from init"
+    start = StartKind.WARM.value
     coarse_time = 0.0
     if init is not None and init.problem.N == problem.N:
         w = fine.controls_to_w(init.t_u, init.u, cost_scale)
     else:
-        start = "coarse ε-homotopy from coasting"
+        start = StartKind.CONTINUATION.value  # on the coarse grid
         t_coarse = time.perf_counter()
         coarse = FieldShooting(problem, o.coarse_intervals, scaling="energy", max_h_lambda=2.0)
         wc = np.zeros(coarse.nw)
