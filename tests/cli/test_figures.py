@@ -107,6 +107,14 @@ def test_solve_figures_direct_and_indirect(checked, tmp_path):
 
 
 @pytest.mark.slow
+def test_field_figures(checked, tmp_path):
+    from mobisense.ocp.plots import save_figures
+
+    save_figures(short_runs.field_solution(), tmp_path / "field")
+    _clean(checked, {f"field/{n}" for n in ("variance_maps.png", "trace.png", "controls.png", "homotopy.png")})
+
+
+@pytest.mark.slow
 def test_replay_figures(checked, tmp_path):
     field = short_runs.field_replay(tmp_path)
     field.plot(tmp_path / "field")
