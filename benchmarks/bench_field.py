@@ -17,6 +17,7 @@ import argparse
 import json
 import os
 import re
+import signal
 import subprocess
 import sys
 import tempfile
@@ -54,11 +55,15 @@ def run(path: Path, method: str, out: Path, cap: float, mem_gb: float) -> dict:
 
         resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
 
+    # its own session, so that a timeout ends the solver too, not only /usr/bin/time
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=cap_memory, start_new_session=True)  # fmt: skip
     try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=cap, preexec_fn=cap_memory)
+        _, err = proc.communicate(timeout=cap)
     except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
         return {"status": f"timeout ({cap:g} s)", "wall": cap}
-    err = proc.stderr
 
     def field(name: str) -> float:
         match = re.search(rf"{name}: ([0-9.:]+)", err)
