@@ -40,9 +40,11 @@ def checked(monkeypatch):
 
         original(path, draw_and_check)
 
+    write_checked.recorder = True  # a module imported during an earlier test holds that test's recorder
     monkeypatch.setattr(files, "write_figure", write_checked)
     for name, module in list(sys.modules.items()):
-        if name.startswith("mobisense.") and getattr(module, "write_figure", None) is original:
+        bound = getattr(module, "write_figure", None)
+        if name.startswith("mobisense.") and (bound is original or getattr(bound, "recorder", False)):
             monkeypatch.setattr(module, "write_figure", write_checked)
     return found
 
