@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast lint bench docs notebooks clean
+.PHONY: demo test test-hostile test-fast lint bench docs notebooks clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -21,12 +21,15 @@ demo: $(STAMP)  ## solve the default problem (problems/hussein2008.yaml) into ou
 
 test: $(STAMP)  ## ruff + the whole test suite (tests and notebooks) + the documentation site: what CI runs
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -m "not hostile_full"
 	$(MAKE) docs
 
 test-fast: $(STAMP)  ## the edit-test loop: everything but notebooks and tests marked slow
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -m "not slow and not notebook" -q
+
+test-hostile: $(STAMP)  ## every case of the hostile-input suite (≈ 340 runs; prints the table of outcomes)
+	$(BIN)/python -m pytest tests/hostile -q
 
 docs: $(STAMP)  ## the documentation site into site/ (mkdocs build --strict: any warning is an error)
 	NO_MKDOCS_2_WARNING=1 MPLBACKEND=Agg $(BIN)/mkdocs build --strict --quiet

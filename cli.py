@@ -3,17 +3,24 @@
 :data:`COMMANDS` is the one registry of sub-commands. Each names a class in its package's ``commands``
 module whose docstring's first line is its help text, with ``add_arguments(parser)`` and
 ``run(args) -> int``; those modules import their heavy dependencies only inside ``run``, so ``--help``
-is fast. Exit status: 0 success, 1 solver or simulation failure (results already computed are kept),
-2 invalid input (one message naming the file and the key path, no traceback), 130 interrupted.
+is fast. Exit status: 0 success, 1 solver or simulation failure, numerical failure or an output file that
+could not be written (results already complete are kept), 2 invalid input — a file, a key, an option, an
+output folder that cannot be used, a problem too large for the memory budget (one line naming the file and
+the key path, no traceback, nothing written), 3 an internal error (a bug: one line; set
+``MOBISENSE_TRACEBACK=1`` to see the traceback), 130 interrupted (Ctrl-C or SIGTERM; files already written
+are complete), 141 standard output closed by its reader (``mobisense examples | head -1``; quietly, as a
+program ended by SIGPIPE).
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
+import signal
 import sys
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NoReturn
 
 from . import __version__
 
@@ -37,11 +44,20 @@ def _command(name: str) -> Any:
     return getattr(importlib.import_module(module_name), class_name)
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (exit status 2), like every other input error."""
+
+    def error(self, message: str) -> NoReturn:  # noqa: D102
+        from .core.errors import one_line
+
+        self.exit(2, f"{self.prog}: error: {one_line(message, 400)} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every sub-command."""
-    parser = argparse.ArgumentParser(prog="mobisense", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="mobisense", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"mobisense {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
     for name in COMMANDS:
         command = _command(name)
         help_line = (command.__doc__ or "").strip().splitlines()[0]
@@ -51,9 +67,29 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _terminate(signum: int, frame: Any) -> None:
+    """SIGTERM (``kill``, a batch scheduler ending the job) stops a command like Ctrl-C."""
+    raise KeyboardInterrupt
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (also used by ``python -m``/console script)."""
-    from .core.config import ConfigError
+    said: list[str] = []
+    try:
+        status = _main(argv, said)
+        sys.stdout.flush()  # a closed pipe is met here, not at interpreter exit
+        return status
+    except KeyboardInterrupt:  # also during the imports, or while an error is being reported
+        if not said:
+            _say("interrupted; files already written are complete")
+        return 130
+    except BrokenPipeError:  # stdout closed by the reader (``mobisense examples | head -1``): end quietly
+        _discard_stdout()
+        return 128 + signal.SIGPIPE
+
+
+def _main(argv: Sequence[str] | None, said: list[str]) -> int:
+    from .core.errors import ComputationError, ConfigError, OutputError, one_line
     from .core.netcdf import recorded_command
 
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -62,15 +98,62 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exit_:  # --help, --version, usage errors: argparse has printed what to say
         return exit_.code if isinstance(exit_.code, int) else 2
+    previous = signal.signal(signal.SIGTERM, _terminate) if _main_thread() else None
+    import numpy as np
+
+    # overflow/invalid-value warnings of intermediate steps are not messages: results are checked for NaN/inf
+    errors = np.seterr(all="ignore")
     try:
         with recorded_command(argv):  # the "history" of every netCDF file written
             return int(args.run(args) or 0)
     except ConfigError as err:
-        print(f"mobisense: error: {err}", file=sys.stderr)
+        _say(f"error: {one_line(str(err), 600)}")
         return 2
+    except (ComputationError, OutputError) as err:
+        _say(f"error: {one_line(str(err), 600)}")
+        return 1
     except KeyboardInterrupt:
-        print("mobisense: interrupted; files already written are complete", file=sys.stderr)
+        said.append("interrupted")
+        _say("interrupted; files already written are complete")
         return 130
+    except BrokenPipeError:
+        raise
+    except MemoryError:
+        _say("error: out of memory; lower the problem size (or --max-memory, the budget checked before starting)")
+        return 1
+    except Exception as err:  # noqa: BLE001  (a bug: one line, the traceback on request)
+        if os.environ.get("MOBISENSE_TRACEBACK"):
+            raise
+        _say(f"internal error: {one_line(f'{type(err).__name__}: {err}', 300)} (a bug: please report it with "
+             "the input; MOBISENSE_TRACEBACK=1 shows the traceback)")  # fmt: skip
+        return 3
+    finally:
+        np.seterr(**errors)
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _main_thread() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
+
+
+def _discard_stdout() -> None:
+    """Point stdout at /dev/null so the interpreter's final flush does not raise again."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):  # stdout has no file descriptor (tests capture it)
+        pass
+
+
+def _say(text: str) -> None:
+    try:
+        print(f"mobisense: {text}", file=sys.stderr, flush=True)
+    except (OSError, ValueError):  # stderr closed
+        pass
 
 
 if __name__ == "__main__":

@@ -1,4 +1,8 @@
-"""Plumbing every package may use: validated configuration files, registries, key paths, atomic outputs."""
+"""Plumbing every package may use: input files, the pre-flight budget, output folders, registries, key paths.
+
+The one reader of input files and validated configurations, the memory/time budget checked before any work,
+checked and locked output folders with atomic files, registries of named implementations, key paths.
+"""
 
 from .lazy import lazy_exports
 
@@ -6,6 +10,14 @@ __getattr__, __dir__, __all__ = lazy_exports(
     __name__,
     {
         "ConfigError": "mobisense.core.config",
+        "ComputationError": "mobisense.core.errors",
+        "OutputError": "mobisense.core.errors",
+        "read_document": "mobisense.core.reader",
+        "Estimate": "mobisense.core.budget",
+        "check_budget": "mobisense.core.budget",
+        "default_memory_limit": "mobisense.core.budget",
+        "OutputFolder": "mobisense.core.output",
+        "deferred_interrupts": "mobisense.core.interrupts",
         "InvalidValue": "mobisense.core.config",
         "StrictModel": "mobisense.core.config",
         "load_config": "mobisense.core.config",

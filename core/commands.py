@@ -28,6 +28,7 @@ class ValidateCommand:
     def run(args: argparse.Namespace) -> int:
         """Validate every file (and the files it names); exit 2 if any is invalid."""
         from .config import ConfigError
+        from .errors import one_line
         from .examples import resolve_input
         from .kinds import FILE_KINDS, check_file
 
@@ -37,7 +38,7 @@ class ValidateCommand:
             try:
                 kind, line = check_file(path)
             except ConfigError as err:
-                print(f"mobisense: error: {err}", file=sys.stderr)
+                print(f"mobisense: error: {one_line(str(err), 600)}", file=sys.stderr)
                 invalid += 1
                 continue
             print(f"{path}: valid {kind} file ({FILE_KINDS[kind].command}) — {line}")
@@ -58,13 +59,18 @@ class SchemaCommand:
     @staticmethod
     def run(args: argparse.Namespace) -> int:
         """Print (or write) the schema."""
+        from .config import ConfigError
         from .files import atomic_path
+        from .output import OutputFolder
         from .schema import file_schema
 
         text = json.dumps(file_schema(args.kind), indent=2, ensure_ascii=False) + "\n"
         if args.out is None:
             sys.stdout.write(text)
             return 0
+        if args.out.is_dir():
+            raise ConfigError(f"--out {args.out}: is a folder; expected a file name")
+        OutputFolder.check(args.out.parent, f"--out {args.out}: its folder")
         with atomic_path(args.out) as tmp:
             tmp.write_text(text, encoding="utf-8")
         print(f"JSON Schema of {args.kind} files written to {args.out}")
@@ -85,8 +91,10 @@ class ExamplesCommand:
         """List, or copy, the shipped examples."""
         from .config import ConfigError
         from .examples import EXAMPLES, copy_examples
+        from .output import OutputFolder
 
         if args.copy is not None:
+            OutputFolder.check(args.copy, "--copy")  # a file, under a file, not writable: exit 2, nothing written
             try:
                 written = copy_examples(args.copy, overwrite=args.force)
             except FileExistsError as err:

@@ -1,22 +1,30 @@
 """Validated configuration files: strict pydantic models, matrix types, and one-line error reports.
 
-Every YAML file the toolkit reads (problems, formations, scenarios, sweeps) is parsed with
-:func:`load_config` into a subclass of :class:`StrictModel`. Any failure — missing file, YAML syntax,
+Every YAML file the toolkit reads (problems, formations, scenarios, sweeps) is read by
+:func:`mobisense.core.reader.read_document` (size, encoding, nesting, alias and duplicate-key limits) and
+validated with :func:`load_config` into a subclass of :class:`StrictModel`. Models are *strict*: a boolean
+is not a number, ``"0.1"`` is not a number, ``1.0`` is not an integer. Every number is finite and, unless
+it is 0, between :data:`MIN_MAGNITUDE` and :data:`MAX_MAGNITUDE` in magnitude, so that the products the
+solvers form (Σ S Σ, B Q B', scales) cannot overflow or underflow. Any failure — missing file, YAML syntax,
 unknown key, wrong shape, non-finite number — raises :class:`ConfigError`, whose message is ONE line
-naming the file, the key path (``sensors[0].p0``), what was expected and what was found. The CLI turns
-it into exit status 2 without a traceback.
+naming the file, the key path (``sensors[0].p0``), what was expected and what was found (at most ~80
+characters of it). The CLI turns it into exit status 2 without a traceback.
 """
 
 from __future__ import annotations
 
 import difflib
 import math
+import types
+import typing
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
 
 import numpy as np
-import yaml
-from pydantic import AfterValidator, BaseModel, ConfigDict, ValidationError
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
+
+from .errors import ConfigError, brief
+from .reader import read_document
 
 __all__ = [
     "ConfigError",
@@ -27,6 +35,9 @@ __all__ = [
     "NonNegativeFloat",
     "Vector2",
     "Matrix",
+    "Seed",
+    "MAX_MAGNITUDE",
+    "MIN_MAGNITUDE",
     "check_square",
     "check_shape",
     "check_spd",
@@ -34,11 +45,13 @@ __all__ = [
     "format_location",
     "load_config",
     "parse_config",
+    "read_yaml",
 ]
 
-
-class ConfigError(ValueError):
-    """A configuration file (or dict) is invalid; ``str(err)`` is a one-line user-facing message."""
+#: largest magnitude of any number in a file: cubes of it stay finite (1e300 < 1.8e308)
+MAX_MAGNITUDE = 1e100
+#: smallest magnitude of a nonzero number: cubes of it stay normal doubles (1e-300 > 2.2e-308)
+MIN_MAGNITUDE = 1e-100
 
 
 class InvalidValue(ValueError):
@@ -51,38 +64,43 @@ class InvalidValue(ValueError):
 
 
 class StrictModel(BaseModel):
-    """Base of every configuration model: unknown keys are rejected, values validated on assignment."""
+    """Base of every configuration model: unknown keys rejected, strict types, validated on assignment."""
 
-    model_config = ConfigDict(extra="forbid", validate_assignment=True, frozen=False)
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, frozen=False, strict=True)
 
 
 def _finite(value: float) -> float:
     if not math.isfinite(value):
-        raise ValueError(f"expected a finite number, got {value!r}")
+        raise ValueError(f"expected a finite number, got {brief(value)}")
+    if value != 0 and not MIN_MAGNITUDE <= abs(value) <= MAX_MAGNITUDE:
+        raise ValueError(
+            f"expected 0 or a magnitude in [{MIN_MAGNITUDE:g}, {MAX_MAGNITUDE:g}], got {value:g} "
+            "(products of such numbers overflow or underflow; change the units)"
+        )
     return float(value)
 
 
 def _positive(value: float) -> float:
     if not value > 0:
-        raise ValueError(f"expected a number > 0, got {value!r}")
+        raise ValueError(f"expected a number > 0, got {brief(value)}")
     return value
 
 
 def _non_negative(value: float) -> float:
     if not value >= 0:
-        raise ValueError(f"expected a number >= 0, got {value!r}")
+        raise ValueError(f"expected a number >= 0, got {brief(value)}")
     return value
 
 
 def _matrix(value: list[list[float]]) -> list[list[float]]:
     if len(value) == 0 or any(len(row) != len(value[0]) for row in value) or len(value[0]) == 0:
-        raise ValueError(f"expected a non-empty rectangular matrix (list of equal-length rows), got {value!r}")
+        raise ValueError(f"expected a non-empty rectangular matrix (list of equal-length rows), got {brief(value)}")
     return value
 
 
 def _vector2(value: list[float]) -> list[float]:
     if len(value) != 2:
-        raise ValueError(f"expected a planar vector of length 2, got length {len(value)}: {value!r}")
+        raise ValueError(f"expected a planar vector of length 2, got length {len(value)}: {brief(value)}")
     return value
 
 
@@ -91,6 +109,8 @@ PositiveFloat = Annotated[float, AfterValidator(_finite), AfterValidator(_positi
 NonNegativeFloat = Annotated[float, AfterValidator(_finite), AfterValidator(_non_negative)]
 Vector2 = Annotated[list[FiniteFloat], AfterValidator(_vector2)]
 Matrix = Annotated[list[list[FiniteFloat]], AfterValidator(_matrix)]
+#: a random seed: what ``numpy.random.default_rng`` accepts (0 … 2⁶³ − 1)
+Seed = Annotated[int, Field(ge=0, le=2**63 - 1)]
 
 
 def check_shape(name: str, value: list[list[float]], shape: tuple[int, int]) -> np.ndarray:
@@ -111,7 +131,7 @@ def check_square(name: str, value: list[list[float]]) -> np.ndarray:
 
 def _check_symmetric(name: str, arr: np.ndarray) -> None:
     if not np.allclose(arr, arr.T, rtol=1e-12, atol=1e-12 * max(1.0, float(np.abs(arr).max()))):
-        raise InvalidValue(name, f"expected a symmetric matrix, got {arr.tolist()}")
+        raise InvalidValue(name, f"expected a symmetric matrix, got {brief(arr.tolist())}")
 
 
 def check_spd(name: str, arr: np.ndarray) -> np.ndarray:
@@ -132,103 +152,219 @@ def check_psd(name: str, arr: np.ndarray) -> np.ndarray:
     return arr
 
 
-def format_location(loc: tuple[Any, ...]) -> str:
-    """Format a pydantic error location as a key path: ``('sensors', 0, 'p0')`` -> ``sensors[0].p0``."""
-    out = ""
+_INTERNAL_LOC = ("function-", "tagged-union", "union[", "lax-or-strict", "json-or-python", "chain[", "nullable")
+
+
+def _unwrap(annotation: Any) -> Any:
+    """Strip ``Annotated`` and ``Optional`` from a field annotation."""
+    while True:
+        origin = typing.get_origin(annotation)
+        if origin is Annotated:
+            annotation = typing.get_args(annotation)[0]
+        elif origin in (typing.Union, types.UnionType):
+            members = [a for a in typing.get_args(annotation) if a is not type(None)]
+            if len(members) != 1:
+                return annotation
+            annotation = members[0]
+        else:
+            return annotation
+
+
+def _is_model(annotation: Any) -> bool:
+    return isinstance(annotation, type) and issubclass(annotation, BaseModel)
+
+
+def _union_member(annotation: Any, label: Any) -> Any:
+    """The member of a union a pydantic location part (a discriminator tag or a type name) designates."""
+    for member in typing.get_args(annotation):
+        member = _unwrap(member)
+        if not _is_model(member):
+            continue
+        if member.__name__ == label:
+            return member
+        for field in member.model_fields.values():
+            if typing.get_origin(field.annotation) is typing.Literal and label in typing.get_args(field.annotation):
+                return member
+    return None
+
+
+def _key_parts(loc: tuple[Any, ...], model: type[BaseModel] | None) -> list[Any]:
+    """The user's keys in a pydantic location: union tags and validator names are dropped.
+
+    ``('reference', 'constant', 'bearing')`` of a discriminated union is ``['reference', 'bearing']``.
+    """
+    parts: list[Any] = []
+    current: Any = model
     for part in loc:
+        current = _unwrap(current) if current is not None else None
+        if isinstance(part, str) and part.startswith(_INTERNAL_LOC):
+            continue
+        origin = typing.get_origin(current)
+        if origin in (typing.Union, types.UnionType):
+            current = _union_member(current, part)  # the part names a member: not a key
+            continue
+        parts.append(part)
+        if _is_model(current):
+            field = current.model_fields.get(part) if isinstance(part, str) else None
+            current = None if field is None else field.annotation
+        elif origin in (list, tuple) and isinstance(part, int):
+            current = (typing.get_args(current) or (None,))[0]
+        elif origin is dict:
+            current = (typing.get_args(current) or (None, None))[-1]
+        else:
+            current = None
+    return parts
+
+
+def format_location(loc: tuple[Any, ...], model: type[BaseModel] | None = None) -> str:
+    """Format a pydantic error location as a key path: ``('sensors', 0, 'p0')`` -> ``sensors[0].p0``.
+
+    With ``model`` (the validated model), union tags and member names pydantic inserts are dropped.
+    """
+    out = ""
+    for part in _key_parts(tuple(loc), model):
         if isinstance(part, int):
             out += f"[{part}]"
-        elif isinstance(part, str) and part.startswith(("function-", "tagged-union")):
-            continue  # pydantic-internal validator names, not keys
         else:
-            out += f".{part}" if out else str(part)
+            name = str(part) if len(str(part)) <= 60 else f"{str(part)[:40]}…({len(str(part))} characters)"
+            out += f".{name}" if out else name
     return out or "(top level)"
 
 
-def _model_at(model: type[BaseModel], loc: tuple[Any, ...]) -> type[BaseModel] | None:
-    """Walk the model tree along ``loc`` (all but the last item) to find the model owning that key."""
+def _model_at(model: type[BaseModel], parts: list[Any]) -> type[BaseModel] | None:
+    """Walk the model tree along the key ``parts`` (all but the last) to find the model owning that key."""
     current: Any = model
-    for part in loc[:-1]:
+    for part in parts[:-1]:
+        current = _unwrap(current)
         if isinstance(part, int):
+            args = typing.get_args(current)
+            current = _unwrap(args[0]) if args else current
             continue
-        if not (isinstance(current, type) and issubclass(current, BaseModel)) or part not in current.model_fields:
+        if not _is_model(current) or part not in current.model_fields:
             return None
-        annotation = current.model_fields[part].annotation
-        current = _innermost_model(annotation)
-    return current if isinstance(current, type) and issubclass(current, BaseModel) else None
+        current = _innermost_model(current.model_fields[part].annotation)
+    current = _unwrap(current)
+    return current if _is_model(current) else None
 
 
 def _innermost_model(annotation: Any) -> Any:
-    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+    if _is_model(annotation):
         return annotation
-    for arg in getattr(annotation, "__args__", ()) or ():
+    for arg in typing.get_args(annotation) or ():
         found = _innermost_model(arg)
         if found is not None:
             return found
     return None
 
 
-def _describe(error: dict[str, Any], model: type[BaseModel]) -> str:
+_KINDS = {bool: "a boolean", str: "a string", int: "an integer", float: "a number", list: "a list", dict: "a mapping"}
+
+
+def _got(value: Any) -> str:
+    kind = next((name for t, name in _KINDS.items() if type(value) is t), None)
+    if value is None:
+        return "got null"
+    if isinstance(value, str):
+        hint = " — remove the quotes" if _numeric(value) else ""
+        return f"got the string {brief(value)}{hint}"
+    return f"got {brief(value)}" + (f", {kind}" if kind in ("a boolean", "a list", "a mapping") else "")
+
+
+def _numeric(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _describe(error: dict[str, Any], model: type[BaseModel], suggestion_for: dict[tuple, str]) -> str:
     loc = tuple(error["loc"])
-    path = format_location(loc)
+    parts = _key_parts(loc, model)
+    path = format_location(loc, model)
     kind = error["type"]
     if kind == "extra_forbidden":
-        owner = _model_at(model, loc)
+        owner = _model_at(model, parts)
         allowed = sorted(owner.model_fields) if owner is not None else []
-        key = str(loc[-1])
-        hint = difflib.get_close_matches(key, allowed, n=1)
-        suggestion = f"; did you mean '{hint[0]}'?" if hint else ""
-        listing = f" (allowed keys: {', '.join(allowed)})" if allowed else ""
+        key = str(parts[-1]) if parts else str(loc[-1])
+        hint = suggestion_for.get(tuple(parts)) or next(iter(difflib.get_close_matches(key, allowed, n=1)), None)
+        suggestion = f"; did you mean '{hint}'?" if hint else ""
+        listing = f" (allowed keys: {', '.join(allowed)})" if allowed and not hint else ""
         return f"{path}: unknown key{suggestion}{listing}"
     if kind == "missing":
         return f"{path}: required key is missing"
     cause = (error.get("ctx") or {}).get("error")
     if isinstance(cause, InvalidValue):
-        prefix = format_location(loc) if loc else ""
+        prefix = path if parts else ""
         return f"{prefix + '.' if prefix else ''}{cause.path}: {cause.message}"
-    message = error["msg"]
+    message = str(error["msg"])
     for prefix in ("Value error, ", "Assertion failed, "):
         if message.startswith(prefix):
             message = message[len(prefix) :]
     if message.startswith("Input should be "):
         message = "expected " + message[len("Input should be ") :]
     got = error.get("input")
-    got_text = "" if kind.startswith("value_error") or isinstance(got, dict) else f" (got {got!r})"
+    got_text = "" if kind.startswith("value_error") or isinstance(got, dict) else f" ({_got(got)})"
     return f"{path}: {message}{got_text}"
+
+
+def _misspellings(errors: list[dict[str, Any]], model: type[BaseModel]) -> dict[tuple, str]:
+    """Unknown keys that are a misspelling of a missing required key of the same mapping: key path -> that key."""
+    missing: dict[tuple, list[str]] = {}
+    for error in errors:
+        if error["type"] == "missing":
+            parts = _key_parts(tuple(error["loc"]), model)
+            if parts and isinstance(parts[-1], str):
+                missing.setdefault(tuple(parts[:-1]), []).append(parts[-1])
+    found: dict[tuple, str] = {}
+    for error in errors:
+        if error["type"] == "extra_forbidden":
+            parts = _key_parts(tuple(error["loc"]), model)
+            candidates = missing.get(tuple(parts[:-1]), [])
+            hint = difflib.get_close_matches(str(parts[-1]), candidates, n=1, cutoff=0.6) if parts else []
+            if hint:
+                found[tuple(parts)] = hint[0]
+    return found
 
 
 T = TypeVar("T", bound=BaseModel)
 
 
 def parse_config(data: Any, model: type[T], source: str = "<dict>") -> T:
-    """Validate ``data`` (a parsed YAML document) against ``model``; raise :class:`ConfigError` on failure."""
+    """Validate ``data`` (a parsed YAML document) against ``model``; raise :class:`ConfigError` on failure.
+
+    The message reports one problem (a misspelled required key first, as "unknown key; did you mean …",
+    not as the missing key it causes) and how many more there are.
+    """
+    if data is None:
+        raise ConfigError(f"{source}: (top level): the file is empty; expected a mapping of keys")
     if not isinstance(data, dict):
-        raise ConfigError(f"{source}: (top level): expected a mapping of keys, got {type(data).__name__}")
+        raise ConfigError(f"{source}: (top level): expected a mapping of keys, got {_KINDS.get(type(data), 'a value')}")
     try:
         return model.model_validate(data)
     except ValidationError as exc:
         errors = exc.errors()
-        first = _describe(errors[0], model)
-        more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
+        misspelled = _misspellings(errors, model)
+        explained = {(*key[:-1], name) for key, name in misspelled.items()}
+
+        def rank(error: dict[str, Any]) -> int:
+            parts = tuple(_key_parts(tuple(error["loc"]), model))
+            return 0 if parts in misspelled else 1
+
+        shown = [e for e in errors if not (e["type"] == "missing" and tuple(_key_parts(tuple(e["loc"]), model))
+                                           in explained)]  # fmt: skip
+        shown.sort(key=rank)
+        first = _describe(shown[0], model, misspelled)
+        rest = len(shown) - 1
+        more = f" (and {rest} more problem{'s' if rest > 1 else ''})" if rest else ""
         raise ConfigError(f"{source}: {first}{more}") from None
+    except RecursionError:
+        raise ConfigError(f"{source}: nested too deeply") from None
 
 
 def read_yaml(path: str | Path) -> Any:
-    """Read a YAML file, raising :class:`ConfigError` (file, line, column) on any failure."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: file not found") from None
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read file ({exc.strerror})") from None
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or str(exc)
-        raise ConfigError(f"{path}:{where}: invalid YAML: {problem}") from None
+    """Read an input file with :func:`mobisense.core.reader.read_document` (raises :class:`ConfigError`)."""
+    return read_document(path)
 
 
 def load_config(path: str | Path, model: type[T]) -> T:
@@ -250,4 +386,4 @@ def load_config(path: str | Path, model: type[T]) -> T:
     ConfigError
         One-line message ``FILE: key.path: what was expected (got …)``.
     """
-    return parse_config(read_yaml(path), model, source=str(path))
+    return parse_config(read_document(path), model, source=str(path))

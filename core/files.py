@@ -1,7 +1,11 @@
 """Atomic output files: nothing is ever half-written.
 
-Each writer produces a temporary file in the destination folder and renames it into place
-(``os.replace`` is atomic on POSIX), so an interrupted run leaves either the previous file or the new one.
+Each writer produces a temporary file ``.NAME.XXXXXXXX.tmp`` in the destination folder and renames it into
+place (``os.replace`` is atomic on POSIX), so an interrupted run leaves either the previous file or the new
+one. A write that fails — disk full, I/O error, read-only file system — removes its temporary file and
+raises :class:`~mobisense.core.errors.OutputError` (one line; the previous file is intact). Temporary files
+of a run killed outright (SIGKILL) are removed by the next run into the folder
+(:func:`mobisense.core.output.remove_stale_temporaries`).
 """
 
 from __future__ import annotations
@@ -17,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from .errors import OutputError
+
 __all__ = ["atomic_path", "write_json", "write_netcdf", "write_figure", "to_jsonable"]
 
 
@@ -24,18 +30,28 @@ __all__ = ["atomic_path", "write_json", "write_netcdf", "write_figure", "to_json
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success it is renamed to ``path``, on error removed."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        os.close(fd)
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot be written ({exc.strerror or exc})") from None
     tmp_path = Path(tmp)
     try:
         yield tmp_path
         if tmp_path.exists():  # mkstemp creates 0600; give the file the usual permissions
             os.chmod(tmp_path, 0o666 & ~_umask())
         os.replace(tmp_path, path)
+    except OSError as exc:
+        if isinstance(exc, OutputError):
+            raise
+        reason = os.strerror(exc.errno) if exc.errno else " ".join(str(exc).split())[:120]
+        raise OutputError(f"{path}: cannot be written ({reason}); the previous version, if any, is unchanged") from None
     finally:
-        if tmp_path.exists():
+        try:
             tmp_path.unlink()
+        except OSError:
+            pass
 
 
 def _umask() -> int:

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from .config import ConfigError
+from .errors import brief
 
 __all__ = ["FileKind", "FILE_KINDS", "detect_kind", "kind_model", "check_file", "load_target"]
 
@@ -106,17 +107,19 @@ def detect_kind(data: Any, source: str | Path) -> str:
     ConfigError
         Not a mapping, an unknown ``kind``, or a shape that fits no kind or several.
     """
+    if data is None:
+        raise ConfigError(f"{source}: (top level): the file is empty; expected a mapping of keys")
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: (top level): expected a mapping of keys, got {type(data).__name__}")
     names = sorted(FILE_KINDS)
     if "kind" in data:
         kind = data["kind"]
-        if kind in FILE_KINDS:
-            return str(kind)
-        hint = difflib.get_close_matches(str(kind), names, n=1)
+        if isinstance(kind, str) and kind in FILE_KINDS:
+            return kind
+        hint = difflib.get_close_matches(kind[:100], names, n=1) if isinstance(kind, str) else []
         suggestion = f"; did you mean '{hint[0]}'?" if hint else ""
         expected = ", ".join(names)
-        raise ConfigError(f"{source}: kind: unknown file kind {kind!r}{suggestion} (expected one of {expected})")
+        raise ConfigError(f"{source}: kind: unknown file kind {brief(kind)}{suggestion} (expected one of {expected})")
     fits = [name for name, kind in FILE_KINDS.items() if kind.shape(data)]
     if len(fits) == 1:
         return fits[0]

@@ -20,24 +20,44 @@ class SteadyStateCommand:
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser) -> None:
         """Add the ``steady-state`` arguments."""
+        from ..core.budget import add_budget_argument
+
         parser.add_argument("formation", type=Path, help="formation YAML file, or a shipped example's name")
         parser.add_argument("--out", type=Path, default=None, help="output folder (default out/<file name>)")
         parser.add_argument("--no-plot", action="store_true", help="skip the contour plot")
+        add_budget_argument(parser)
 
     @staticmethod
     def run(args: argparse.Namespace) -> int:
         """Validate, design, write ``summary.json``, ``trace_grid.nc`` and ``trace_contour.png``."""
+        import math
+
+        from ..core.budget import Estimate, check_budget
         from ..core.config import load_config
+        from ..core.errors import ComputationError, numerical_failures
         from ..core.examples import resolve_input
-        from ..core.output import default_output_folder
+        from ..core.output import OutputFolder, default_output_folder
         from .cooperative.design_study import FormationFile, design_formation
 
         args.formation = resolve_input(args.formation)
+        source = str(args.formation)
         config = load_config(args.formation, FormationFile)  # ConfigError -> exit 2, nothing written
-        out = args.out if args.out is not None else default_output_folder(args.formation)
-        study = design_formation(config)
-        study.save(out, figures=not args.no_plot)
-        s = study.summary
+        grid = config.contour_resolution**2
+        check_budget([Estimate("the tr P grid", 8.0 * 8 * grid, "a lower contour_resolution", 2e-6 * grid)],
+                     args.max_memory, source, args.max_time)  # fmt: skip
+        folder = OutputFolder.check(args.out if args.out is not None else default_output_folder(args.formation))
+        with folder.lock():
+            out = folder.path
+            with numerical_failures(f"designing {source}"):
+                study = design_formation(config)
+            s = study.summary
+            values = [s["trace"]] + ([s["a"], s["b"]] if s["formation"] == "cross" else [])
+            if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in values):
+                raise ComputationError(
+                    f"designing {source}: the steady state is not finite (tr P = {s['trace']}): the noise levels "
+                    "or bounds make the Riccati equation degenerate"
+                )
+            study.save(out, figures=not args.no_plot)
         if s["formation"] == "cross":
             print(f"{s['stationary_point']}: a = {s['a']:.6g}, b = {s['b']:.6g}, tr P = {s['trace']:.6g} -> {out}")
         return 0

@@ -35,7 +35,9 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 __all__ = ["ReplayCommand", "SimulateCommand", "SIMULATION_KINDS", "check_scenario"]
 
@@ -49,33 +51,26 @@ class ReplayCommand:
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser) -> None:
         """Add the ``replay`` arguments."""
+        from ..core.budget import add_budget_argument
+
         parser.add_argument(
             "scenario", type=Path, help="scenario YAML file (see problems/replay_*.yaml) or a shipped example's name"
         )
         parser.add_argument("--out", type=Path, default=None, help="output folder (default out/<file name>)")
-        parser.add_argument("--seed", type=int, default=None, help="override the scenario's random seed")
+        parser.add_argument("--seed", type=_seed, default=None, help="override the scenario's random seed")
         parser.add_argument("--no-plot", action="store_true", help="skip the figures")
         parser.add_argument(
             "--animate", action="store_true", help="also write replay.mp4 (or .gif) of a field replay"
         )
         parser.add_argument("--quiet", action="store_true", help="no progress bar")
+        add_budget_argument(parser)
 
     @staticmethod
     def run(args: argparse.Namespace) -> int:
         """Validate, replay, write the outputs; return the exit status."""
-        from ..core.examples import resolve_input
-        from .replay.simulation import ReplayError
-        from .scenarios import load_scenario
-
-        args.scenario = resolve_input(args.scenario)
-        scenario = load_scenario(args.scenario, "replay")
         progress = not args.quiet and sys.stderr.isatty()
-        try:
-            result = scenario.run(args.seed, progress=progress, animate=args.animate)
-        except (ReplayError, RuntimeError) as err:
-            print(f"mobisense: error: {args.scenario}: {err}", file=sys.stderr)
-            return 1
-        return _save(result, args, args.scenario)
+        return _simulate(args, "replay", lambda scenario: scenario.run(args.seed, progress=progress,
+                                                                        animate=args.animate))  # fmt: skip
 
 
 class SimulateCommand:
@@ -84,39 +79,60 @@ class SimulateCommand:
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser) -> None:
         """Add the ``simulate`` arguments."""
+        from ..core.budget import add_budget_argument
+
         parser.add_argument("kind", choices=sorted(SIMULATION_KINDS), help="which simulation")
         parser.add_argument("scenario", type=Path, help="scenario YAML file, or a shipped example's name")
         parser.add_argument("--out", type=Path, default=None, help="output folder (default out/<file name>)")
         parser.add_argument("--no-plot", action="store_true", help="skip the figures")
-        parser.add_argument("--seed", type=int, default=None, help="override the scenario's random seed")
+        parser.add_argument("--seed", type=_seed, default=None, help="override the scenario's random seed")
+        add_budget_argument(parser)
 
     @staticmethod
     def run(args: argparse.Namespace) -> int:
         """Validate, simulate, write the outputs; return the exit status."""
-        from ..core.examples import resolve_input
-        from .leader_follower.controls import FormationSingularityError
-        from .scenarios import load_scenario
+        progress = sys.stderr.isatty()
+        return _simulate(args, SIMULATION_KINDS[args.kind], lambda scenario: scenario.run(args.seed, progress=progress))
 
-        args.scenario = resolve_input(args.scenario)
-        scenario = load_scenario(args.scenario, SIMULATION_KINDS[args.kind])
-        try:
-            result = scenario.run(args.seed, progress=sys.stderr.isatty())
-        except (FormationSingularityError, RuntimeError) as err:
-            print(f"mobisense: error: {args.scenario}: {err}", file=sys.stderr)
+
+def _seed(text: str) -> int:
+    """The argparse type of ``--seed``: an integer in 0 … 2⁶³ − 1 (numpy's generators refuse negative seeds)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text[:40]!r}") from None
+    if not 0 <= value < 2**63:
+        raise argparse.ArgumentTypeError(f"expected an integer in 0 … 2^63 - 1, got {text[:40]}")
+    return value
+
+
+def _simulate(args: argparse.Namespace, kind: str, run: Callable[[Any], Any]) -> int:
+    """Load, budget, check the output folder, lock it, simulate, save; the exit status."""
+    from ..core.budget import check_budget
+    from ..core.errors import numerical_failures
+    from ..core.examples import resolve_input
+    from ..core.output import OutputFolder, default_output_folder
+    from .scenarios import load_scenario
+
+    args.scenario = resolve_input(args.scenario)
+    source = str(args.scenario)
+    scenario = load_scenario(args.scenario, kind)  # ConfigError -> exit 2, nothing written
+    check_budget(scenario.estimates(), args.max_memory, source, args.max_time)
+    folder = OutputFolder.check(args.out if args.out is not None else default_output_folder(args.scenario))
+    with folder.lock():
+        with numerical_failures(f"simulating {source}"):
+            result = run(scenario)
+        problem = result.non_finite()
+        if problem is not None:
+            print(f"mobisense: error: {source}: the simulation diverged: {problem}", file=sys.stderr)
             return 1
-        status = _save(result, args, args.scenario)
-        if result.summary.get("status", "ok") != "ok":
-            print(f"mobisense: {result.summary['status']}", file=sys.stderr)
-            return 1
-        return status
-
-
-def _save(result: object, args: argparse.Namespace, source: Path) -> int:
-    from ..core.output import default_output_folder
-
-    out = args.out if args.out is not None else default_output_folder(source)
-    result.save(out, figures=not args.no_plot)  # type: ignore[attr-defined]
-    result.report(out)  # type: ignore[attr-defined]
+        with numerical_failures(f"writing the results of {source}"):
+            result.save(folder.path, figures=not args.no_plot)
+        result.report(folder.path)
+    status = result.summary.get("status", "ok")
+    if status != "ok":
+        print(f"mobisense: {status}", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -42,6 +42,12 @@ class Scenario:
     config: Any
     source: Path
 
+    def estimates(self) -> list[Any]:
+        """Memory and time of :meth:`run` (:class:`mobisense.core.budget.Estimate` items) from the sizes."""
+        from .sizes import scenario_estimates
+
+        return scenario_estimates(self.kind, self.config, self.source)
+
     def run(self, seed: int | None = None, progress: bool = False, animate: bool = False) -> SimulationResult:
         """Simulate the scenario.
 
@@ -84,7 +90,12 @@ def replay_kind(data: Any, source: Path) -> str:
     from ..core.config import ConfigError
     from ..core.kinds import FILE_KINDS
 
-    kind = data.get("kind") if isinstance(data, dict) else None
+    if data is None:
+        raise ConfigError(f"{source}: (top level): the file is empty; expected a mapping of keys")
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: (top level): expected a mapping of keys (a field replay or a plan replay)")
+    kind = data.get("kind")
+    kind = kind if isinstance(kind, str) else None  # a list or mapping is reported by the model
     if kind in ("field_replay", "plan_replay"):
         return str(kind)
     if kind in FILE_KINDS:

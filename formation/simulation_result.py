@@ -11,7 +11,16 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-__all__ = ["SimulationResult"]
+__all__ = ["SimulationResult", "MUST_BE_FINITE"]
+
+#: result kind -> the variables of its dataset that are finite in any valid run (positions, the estimate):
+#: NaN or inf there means the simulation diverged, and it is reported as a failure instead of being saved
+MUST_BE_FINITE: dict[str, tuple[str, ...]] = {
+    "leader_follower": ("x", "y", "phi"),
+    "distributed": ("sensor_position", "z_constrained"),
+    "field_replay": ("r", "z_est"),
+    "plan_replay": ("r", "nees_predicted"),
+}
 
 
 class SimulationResult:
@@ -35,6 +44,18 @@ class SimulationResult:
     def to_xarray(self) -> Any:
         """The simulated data as an ``xarray.Dataset``."""
         return self.dataset
+
+    def non_finite(self) -> str | None:
+        """Which of the :data:`MUST_BE_FINITE` variables holds NaN or inf (``None`` when the run is finite)."""
+        import numpy as np
+
+        for name in MUST_BE_FINITE.get(self.kind, ()):
+            if name in self.dataset.data_vars:
+                values = np.asarray(self.dataset[name].values, dtype=float)
+                bad = int(values.size - np.isfinite(values).sum())
+                if bad:
+                    return f"{name} has {bad} NaN or infinite values"
+        return None
 
     def plot(self, folder: str | Path) -> list[Path]:
         """Write the figures into ``folder``; return their paths (none by default)."""

@@ -22,6 +22,8 @@ class SolveCommand:
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser) -> None:
         """Add the ``solve`` arguments."""
+        from ..core.budget import add_budget_argument
+        from .batch.cluster import add_cluster_arguments, positive_int
         from .registries import HOMOTOPY_MODES, METHODS, SCHEMES
 
         parser.add_argument(
@@ -42,50 +44,79 @@ class SolveCommand:
         parser.add_argument("--quiet", action="store_true", help="no progress display or table")
         parser.add_argument(
             "--multistart",
-            type=int,
+            type=positive_int,
             default=None,
             metavar="K",
             help="solve from K initial guesses (start 0: the homotopy; others: random feasible "
             "trajectories solved at ε = 1) on dask workers and keep the best",
         )
-        parser.add_argument("--workers", type=int, default=None, help="local worker processes for --multistart")
-        parser.add_argument("--scheduler", default=None, help="dask scheduler address for --multistart")
+        add_cluster_arguments(parser, "--multistart")
+        add_budget_argument(parser)
 
     @staticmethod
     def run(args: argparse.Namespace) -> int:
         """Validate, solve, write outputs; exit 0 (solved), 1 (solver failure, partial results kept), 2 (bad input)."""
+        from ..core.budget import check_budget
         from ..core.config import ConfigError, read_yaml
+        from ..core.errors import numerical_failures
         from ..core.examples import resolve_input
-        from ..core.output import default_output_folder
+        from ..core.output import OutputFolder, default_output_folder
+        from .batch.cluster import Cluster
         from .problem import Problem
         from .reporting import SolveReporter
+        from .sizes import problem_estimates
 
         args.problem = resolve_input(args.problem)
+        source = str(args.problem)
         data = apply_overrides(read_yaml(args.problem), args)
-        problem = Problem.from_dict(data, source=str(args.problem))  # ConfigError -> exit 2, nothing written
-        out = args.out if args.out is not None else default_output_folder(args.problem)
-        reporter = SolveReporter(problem, quiet=args.quiet)
+        problem = Problem.from_dict(data, source=source)  # ConfigError -> exit 2, nothing written
+        cluster = Cluster.from_args(args)
+        if args.multistart is None and (cluster.scheduler or cluster.workers):
+            raise ConfigError(f"{source}: --workers/--scheduler: only used with --multistart")
         if args.multistart is not None:
-            if args.multistart < 1 or problem.solver.method != "direct":
-                raise ConfigError(f"{args.problem}: --multistart: expected K >= 1 with solver.method 'direct'")
             from ..core.extras import require_extra
 
+            if problem.solver.method != "direct":
+                raise ConfigError(
+                    f"{source}: --multistart: expected solver.method 'direct', got {problem.solver.method!r}"
+                )
+
             require_extra("sweep", "mobisense solve --multistart")
-            from .batch.multistart import solve_multistart
+        starts = args.multistart or 1
+        local = 0 if args.multistart is None or cluster.scheduler else min(starts, _local_workers(cluster.workers))
+        estimates = problem_estimates(problem, starts=starts, local_workers=local)
+        check_budget(estimates, args.max_memory, source, args.max_time)
+        folder = OutputFolder.check(args.out if args.out is not None else default_output_folder(args.problem))
+        reporter = SolveReporter(problem, quiet=args.quiet)
+        with folder.lock():
+            out = folder.path
+            with numerical_failures(f"solving {source}"):
+                if args.multistart is not None:
+                    from .batch.multistart import solve_multistart
 
-            solution = solve_multistart(problem, args.multistart, args.scheduler, args.workers)
-        else:
-            solution = reporter.run(problem.solver.method)
-        solution.save(out)
-        if not args.no_plot:
-            from .plots import save_figures
+                    solution = solve_multistart(problem, starts, cluster.scheduler, cluster.workers, cluster.security)
+                else:
+                    solution = reporter.run(problem.solver.method)
+            solution.save(out)
+            if not args.no_plot:
+                from .plots import save_figures
 
-            save_figures(solution, out)
-        reporter.report(solution, out)
+                with numerical_failures(f"plotting {source}"):
+                    save_figures(solution, out)
+            reporter.report(solution, out)
         if not solution.success:
             print(f"mobisense: solver failure: {solution.message}", file=sys.stderr)
             return 1
+        warning = solution.summary().get("warning")
+        if warning:
+            print(f"mobisense: warning: {warning}", file=sys.stderr)
         return 0
+
+
+def _local_workers(requested: int | None) -> int:
+    import os
+
+    return requested or os.cpu_count() or 1
 
 
 def apply_overrides(data: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
@@ -146,12 +177,12 @@ class SweepCommand:
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser) -> None:
         """Add the ``sweep`` arguments."""
+        from ..core.budget import add_budget_argument
+        from .batch.cluster import add_cluster_arguments
+
         parser.add_argument("sweep", type=Path, help="sweep YAML file (base problem, mode, vary) or a shipped example")
         parser.add_argument("--out", type=Path, default=None, help="output folder (default out/<file name>)")
-        parser.add_argument("--scheduler", default=None, help="address of a running dask scheduler (tcp://…)")
-        parser.add_argument(
-            "--workers", type=int, default=None, help="local worker processes (default: one per core)"
-        )
+        add_cluster_arguments(parser, "the tasks")
         parser.add_argument("--no-warm-start", action="store_true", help="solve every task from the coasting guess")
         parser.add_argument(
             "--time-limit",
@@ -161,6 +192,7 @@ class SweepCommand:
             help="wall-clock limit of each Ipopt solve of a task (sets solver.time_limit)",
         )
         parser.add_argument("--quiet", action="store_true", help="no progress display")
+        add_budget_argument(parser)
         parser.add_argument("--no-plot", action="store_true", help="skip cost.png (the cost over the varied keys)")
 
     @staticmethod
@@ -169,22 +201,29 @@ class SweepCommand:
         from ..core.examples import resolve_input
         from ..core.extras import require_extra
         from ..core.output import default_output_folder
+        from .batch.cluster import Cluster
         from .batch.sweep_runner import run_sweep
 
         require_extra("sweep", "mobisense sweep")
         args.sweep = resolve_input(args.sweep)
+        cluster = Cluster.from_args(args)
         out = args.out if args.out is not None else default_output_folder(args.sweep)
         result = run_sweep(
             args.sweep,
             out,
-            scheduler=args.scheduler,
-            workers=args.workers,
+            scheduler=cluster.scheduler,
+            workers=cluster.workers,
             warm_start=not args.no_warm_start,
             time_limit=args.time_limit,
             quiet=args.quiet,
+            security=cluster.security,
+            max_memory=args.max_memory,
+            max_time=args.max_time,
         )
         if not args.no_plot and len(result.table):
+            from ..core.errors import numerical_failures
             from .batch.sweep_plots import save_sweep_figures
 
-            save_sweep_figures(result)
+            with numerical_failures(f"plotting {args.sweep}"):
+                save_sweep_figures(result)
         return 0 if result.summary["counts"]["error"] == 0 else 1

@@ -126,6 +126,12 @@ class FieldSpec(StrictModel):
         """Number of states nx·ny."""
         return self.grid[0] * self.grid[1]
 
+    def locations(self) -> np.ndarray:
+        """Cell centres (n, 2) (L), row-major with x fastest (no n × n allocation)."""
+        (nx, ny), ((x0, x1), (y0, y1)) = self.grid, self.extent
+        X, Y = np.meshgrid(x0 + (np.arange(nx) + 0.5) * (x1 - x0) / nx, y0 + (np.arange(ny) + 0.5) * (y1 - y0) / ny)
+        return np.column_stack([X.ravel(), Y.ravel()])
+
     def process(self) -> FieldProcess:
         """The numeric field (Kₛ, its inverse, the locations), built once per distinct spec."""
         return _build(self.model_dump_json())
@@ -157,10 +163,7 @@ class FieldProcess:
     def __post_init__(self) -> None:
         s = self.spec
         (nx, ny), ((x0, x1), (y0, y1)) = s.grid, s.extent
-        xs = x0 + (np.arange(nx) + 0.5) * (x1 - x0) / nx
-        ys = y0 + (np.arange(ny) + 0.5) * (y1 - y0) / ny
-        X, Y = np.meshgrid(xs, ys)
-        self.locations = np.column_stack([X.ravel(), Y.ravel()])
+        self.locations = s.locations()
         h_min = min((x1 - x0) / nx, (y1 - y0) / ny)
         ell = s.kernel.length_scale
         self.smoothing = 1e-2 * h_min if s.kernel.type == "exponential" else 1e-6 * ell

@@ -5,7 +5,8 @@ solution and returns whether it succeeded (the caller keeps the accepted state).
 
 - ``fixed``: ε = δ, 2δ, …, 1 (the paper: δ = 0.05); the first failure stops the continuation.
 - ``adaptive``: start with δ; after a success grow the step by ``growth``, after a failure halve it and
-  retry from the last accepted ε; stop when the step falls below ``min_step``.
+  retry from the last accepted ε; stop when the step falls below ``min_step`` or after
+  :data:`MAX_ATTEMPTS` attempts.
 - ``none``: solve ε = 1 directly.
 """
 
@@ -16,7 +17,17 @@ from collections.abc import Callable
 from .problem import HomotopyOptions
 from .registries import HOMOTOPY_MODES
 
-__all__ = ["run_continuation", "fixed_schedule", "fixed_continuation", "adaptive_continuation", "direct_to_one"]
+#: most attempts of the adaptive continuation (each is an Ipopt solve)
+MAX_ATTEMPTS = 10_000
+
+__all__ = [
+    "MAX_ATTEMPTS",
+    "run_continuation",
+    "fixed_schedule",
+    "fixed_continuation",
+    "adaptive_continuation",
+    "direct_to_one",
+]
 
 
 def fixed_schedule(step: float) -> list[float]:
@@ -40,7 +51,9 @@ def fixed_continuation(attempt: Callable[[float], bool], options: HomotopyOption
 def adaptive_continuation(attempt: Callable[[float], bool], options: HomotopyOptions) -> float:
     """Grow the step by ``growth`` after a success, halve it after a failure; give up below ``min_step``."""
     accepted, step = 0.0, options.step
-    while accepted < 1.0:
+    for _ in range(MAX_ATTEMPTS):
+        if accepted >= 1.0:
+            break
         eps = min(1.0, round(accepted + step, 12))
         if attempt(eps):
             accepted = eps

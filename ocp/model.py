@@ -162,12 +162,7 @@ class ParameterLayout:
         """All blocks' numbers for ``problem`` at homotopy parameter ``eps`` (scales chosen here)."""
         mats = problem.matrices()
         d = np.sqrt(np.diag(mats["Sigma0"]))
-        length = max(
-            1.0,
-            *(np.linalg.norm(np.asarray(s.p0) - loc) for s in problem.sensors for loc in mats["locations"]),
-        )
-        horizon = problem.horizon.tf - problem.horizon.t0
-        velocity = max(length / horizon, *(np.linalg.norm(s.v0) for s in problem.sensors))
+        scales = problem.reference_scales()
         values: dict[str, Any] = {
             "eps": eps,
             "t0": problem.horizon.t0,
@@ -179,9 +174,9 @@ class ParameterLayout:
             "K": mats["K"],
             "Sigma0": mats["Sigma0"],
             "sigma_scale": np.outer(d, d),
-            "length_scale": length,
-            "velocity_scale": velocity,
-            "control_scale": velocity / horizon,
+            "length_scale": scales["length"],
+            "velocity_scale": scales["velocity"],
+            "control_scale": scales["control"],
             "cost_scale": 1.0,
         }
         if problem.process.field is not None and any(problem.is_point(i) for i in range(problem.N)):

@@ -31,7 +31,7 @@ from typing import Any, ClassVar, Literal
 
 import casadi as ca
 
-from ..core.config import PositiveFloat, StrictModel
+from ..core.config import InvalidValue, PositiveFloat, StrictModel
 from .registries import NOISE_MODELS
 
 __all__ = ["NoiseModel", "QuadraticRange", "ConstantNoise", "register_noise_model", "parse_noise"]
@@ -106,8 +106,8 @@ def parse_noise(value: Any) -> NoiseModel:
     if not isinstance(value, dict) or "model" not in value:
         raise ValueError(f"expected a mapping with a 'model' key, one of {NOISE_MODELS.names()}")
     name = value["model"]
-    if name not in NOISE_MODELS:
-        raise ValueError(NOISE_MODELS.unknown(name))
+    if not isinstance(name, str) or name not in NOISE_MODELS:
+        raise InvalidValue("model", NOISE_MODELS.unknown(name))
     model = NOISE_MODELS[name]
     if not (isinstance(model, type) and issubclass(model, NoiseModel)):
         raise ValueError(f"noise model {name!r} is registered as {model!r}, which is not a NoiseModel subclass")

@@ -29,6 +29,8 @@ import numpy as np
 from pydantic import BeforeValidator, Field, SerializeAsAny, model_validator
 
 from ..core.config import (
+    MAX_MAGNITUDE,
+    MIN_MAGNITUDE,
     FiniteFloat,
     InvalidValue,
     Matrix,
@@ -67,6 +69,10 @@ __all__ = [
 ]
 
 
+#: shortest horizon relative to the magnitude of its times: below it the grid's times are not distinct
+HORIZON_RESOLUTION = 1e-9
+
+
 class Units(StrictModel):
     """Units of the numbers of a problem file (UDUNITS symbols; ``"1"`` for a dimensionless quantity).
 
@@ -94,7 +100,16 @@ class Horizon(StrictModel):
     @model_validator(mode="after")
     def _ordered(self) -> Horizon:
         if not self.tf > self.t0:
-            raise InvalidValue("tf", f"expected tf > t0 = {self.t0}, got {self.tf}")
+            raise InvalidValue("tf", f"expected tf > t0 = {self.t0:g}, got {self.tf:g}")
+        span = self.tf - self.t0
+        if not MIN_MAGNITUDE <= span <= MAX_MAGNITUDE:
+            raise InvalidValue("tf", f"expected tf − t0 in [{MIN_MAGNITUDE:g}, {MAX_MAGNITUDE:g}], got {span:g}")
+        if span < HORIZON_RESOLUTION * max(abs(self.t0), abs(self.tf)):
+            raise InvalidValue(
+                "tf",
+                f"tf − t0 = {span:g} is below the resolution of times near {max(abs(self.t0), abs(self.tf)):g} "
+                "(the collocation times would coincide); shift t0 towards 0",
+            )
         return self
 
 
@@ -154,7 +169,7 @@ class Terminal(StrictModel):
 class Sensor(StrictModel):
     """One mobile sensor: a planar double integrator ``p' = v, v' = u`` with a noise model."""
 
-    name: str = Field(description="sensor name (unique), used in outputs")
+    name: str = Field(min_length=1, max_length=100, description="sensor name (unique), used in outputs")
     p0: Vector2 = Field(description="initial position [x, y] (L)")
     v0: Vector2 = Field(description="initial velocity [vx, vy] (L/T)")
     noise: Annotated[SerializeAsAny[NoiseModel], BeforeValidator(parse_noise)] = Field(
@@ -203,13 +218,27 @@ class CollocationOptions(StrictModel):
     intervals: int = Field(100, ge=1, le=100_000)
 
 
+#: smallest ε step: at most 10⁴ steps from ε = 0 to 1
+MIN_HOMOTOPY_STEP = 1e-4
+
+
 class HomotopyOptions(StrictModel):
-    """ε-continuation (docs/theory/direct.md §5.2): ``fixed`` steps of ``step``, ``adaptive`` steps, or ``none``."""
+    """ε-continuation (docs/theory/direct.md §5.2): ``fixed`` steps of ``step``, ``adaptive`` steps, or ``none``.
+
+    ``step`` ≥ 10⁻⁴ (at most 10⁴ fixed steps); ``adaptive`` halves a failed step down to ``min_step`` ≥ 10⁻⁶
+    and makes at most :data:`mobisense.ocp.homotopy.MAX_ATTEMPTS` attempts.
+    """
 
     mode: HomotopyModeName = "fixed"
-    step: float = Field(0.05, gt=0.0, le=1.0)
-    min_step: float = Field(1e-3, gt=0.0, le=1.0)
+    step: float = Field(0.05, ge=MIN_HOMOTOPY_STEP, le=1.0)
+    min_step: float = Field(1e-3, ge=1e-6, le=1.0)
     growth: float = Field(2.0, ge=1.0, le=10.0)
+
+    @model_validator(mode="after")
+    def _steps(self) -> HomotopyOptions:
+        if self.min_step > self.step:
+            raise InvalidValue("min_step", f"expected min_step <= step = {self.step:g}, got {self.min_step:g}")
+        return self
 
 
 class BVPOptions(StrictModel):
@@ -229,10 +258,12 @@ class BVPOptions(StrictModel):
     )
     intervals: int | None = Field(None, ge=2, le=100_000)
     tolerance: float = Field(1e-10, gt=0.0, lt=1e-2)
-    newton_iterations: int = Field(50, ge=1)
-    max_arclength_steps: int = Field(400, ge=1)
+    newton_iterations: int = Field(50, ge=1, le=10_000)
+    max_arclength_steps: int = Field(400, ge=1, le=100_000)
     scipy_tolerance: float = Field(1e-8, gt=0.0, lt=1e-2, description="solve_bvp tol (relative residual)")
-    max_nodes: int = Field(20_000, ge=10, description="solve_bvp mesh limit (bounds the time of a failing step)")
+    max_nodes: int = Field(
+        20_000, ge=10, le=10_000_000, description="solve_bvp mesh limit (bounds the time of a failing step)"
+    )
     polish: bool = Field(
         True, description="re-solve the collocation result at ε = 1 with solve_bvp (adaptive mesh to scipy_tolerance)"
     )
@@ -273,15 +304,19 @@ class SolverOptions(StrictModel):
     homotopy: HomotopyOptions = HomotopyOptions()
     bvp: BVPOptions = BVPOptions()
     tolerance: float = Field(1e-9, gt=0.0, lt=1e-2, description="Ipopt tol (scaled NLP error)")
-    max_iterations: int = Field(500, ge=1)
-    time_limit: float | None = Field(None, gt=0.0, description="wall-clock limit of each Ipopt solve (s)")
+    max_iterations: int = Field(500, ge=1, le=1_000_000)
+    time_limit: float | None = Field(
+        None, gt=0.0, le=1e9, description="wall-clock limit of each Ipopt solve (s)"
+    )
 
 
 class Problem(StrictModel):
     """A mobile-sensor Kalman optimal-control problem (docs/theory/ocp.md §1–§2) plus its solver options."""
 
     kind: Literal["problem"] | None = Field(None, description="file kind (optional for problem files)")
-    name: str = Field(pattern=r"^[A-Za-z0-9_.\-]+$", description="problem name (letters, digits, _ . -)")
+    name: str = Field(
+        pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.\-]{0,127}$", description="problem name: letters, digits, _ . - (no path)"
+    )
     units: Units = Field(Units(), description="units of the file's numbers (default metre, second)")
     horizon: Horizon = Field(description="time horizon [t0, tf]")
     process: Process = Field(description="the estimated process and its initial error covariance")
@@ -305,6 +340,16 @@ class Problem(StrictModel):
                 check(f"cost.{key}", check_shape(f"cost.{key}", getattr(self.cost, key), (n, n)))
         if self.cost.M == "zero":
             raise InvalidValue("cost.M", "expected a positive definite terminal weight, not 'zero'")
+        scales = self.reference_scales()
+        for name, key, unit in (("length", "sensors", "L"), ("velocity", "horizon", "L/T"),
+                                ("control", "horizon", "L/T²")):  # fmt: skip
+            if not MIN_MAGNITUDE <= scales[name] <= MAX_MAGNITUDE:
+                raise InvalidValue(
+                    key,
+                    f"the {name} scale of the problem is {scales[name]:g} {unit}, outside [{MIN_MAGNITUDE:g}, "
+                    f"{MAX_MAGNITUDE:g}] (distances {scales['length']:g} L over tf − t0 = {scales['horizon']:g} T); "
+                    "change the length or time units",
+                )
         names = [s.name for s in self.sensors]
         for i, sensor in enumerate(self.sensors):
             if names.index(sensor.name) != i:
@@ -366,6 +411,21 @@ class Problem(StrictModel):
                                "method has no kriging rows yet)")  # fmt: skip
 
     # ------------------------------------------------------------------ numeric accessors
+    def reference_scales(self) -> dict[str, float]:
+        """Sizes the NLP is scaled by: ``horizon`` tf − t0 (T), ``length`` (L), ``velocity`` (L/T), ``control`` (L/T²).
+
+        ``length`` is the largest sensor–state distance at t0 (at least 1), ``velocity`` the larger of
+        length / horizon and the initial speeds, ``control`` = velocity / horizon.
+        """
+        horizon = self.horizon.tf - self.horizon.t0
+        field = self.process.field
+        locations = field.locations() if field is not None else np.asarray(self.process.locations, float)
+        starts = np.asarray([s.p0 for s in self.sensors], float)
+        distances = np.linalg.norm(starts[:, None, :] - locations[None, :, :], axis=-1)
+        length = max(1.0, float(distances.max()))
+        velocity = max(length / horizon, *(float(np.hypot(*s.v0)) for s in self.sensors))
+        return {"horizon": horizon, "length": length, "velocity": velocity, "control": velocity / horizon}
+
     @property
     def n(self) -> int:
         """Number of process states."""

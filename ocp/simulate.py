@@ -7,6 +7,7 @@ no-control baseline cost, and to re-simulate an optimised control as an independ
 from __future__ import annotations
 
 import functools
+import re
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -105,7 +106,8 @@ def _coasting_integrator(model: SensorKalmanModel, grid: tuple[float, ...], rtol
         "ode": horizon * model.f(x, u, P) / x_scale,
         "quad": horizon * model.running(x, u, P),
     }
-    return ca.integrator("coasting", "cvodes", dae, 0.0, list(grid), {"abstol": rtol, "reltol": rtol})
+    options = {"abstol": rtol, "reltol": rtol, "disable_internal_warnings": True}
+    return ca.integrator("coasting", "cvodes", dae, 0.0, list(grid), options)
 
 
 def coast(model: SensorKalmanModel, P: np.ndarray, t_eval: np.ndarray, rtol: float = 1e-13) -> Trajectory:
@@ -120,7 +122,14 @@ def coast(model: SensorKalmanModel, P: np.ndarray, t_eval: np.ndarray, rtol: flo
     grid = tuple(float(v) for v in (np.asarray(t_eval, float)[1:] - t0) / (tf - t0))
     x_scale = np.asarray(model.scales(P)[0]).ravel()
     x0 = np.asarray(model.x0(P)).ravel()
-    out = _coasting_integrator(model, grid, rtol)(x0=x0 / x_scale, p=P)
+    try:
+        out = _coasting_integrator(model, grid, rtol)(x0=x0 / x_scale, p=P)
+    except RuntimeError as exc:
+        status = re.search(r'CVode returned "(\w+)"', str(exc))
+        raise RuntimeError(
+            f"integrating the no-control Riccati equation failed (CVODES {status.group(1) if status else 'error'}): "
+            "the covariance dynamics are too stiff or their numbers too extreme; rescale the problem"
+        ) from None
     x = np.vstack([x0, np.asarray(out["xf"]).T * x_scale])
     q = np.asarray(out["qf"])[:, -1]
     return Trajectory(

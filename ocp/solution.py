@@ -16,8 +16,10 @@ from typing import Any
 
 import numpy as np
 
+from ..core.errors import ConfigError
 from ..core.files import to_jsonable, write_json, write_netcdf
 from .problem import Problem
+from .solution_file import brief_error, open_solution_file, read_solution_problem
 from .state_layout import StateLayout
 
 __all__ = ["SolveStatus", "StartKind", "HomotopyStep", "TrajectorySample", "Solution"]
@@ -216,6 +218,36 @@ class Solution:
             return float(self.stats["min_sigma_eigenvalue"])
         return float(np.linalg.eigvalsh(self.Sigma).min())
 
+    def non_finite(self) -> str | None:
+        """What is NaN or infinite in the solution (cost, Σ, p, v, u), or ``None`` if everything is finite."""
+        for name in ("terminal_cost", "running_cost", "control_energy"):
+            if not np.isfinite(getattr(self, name)):
+                return f"the {name.replace('_', ' ')} is {getattr(self, name)}"
+        for name in ("Sigma", "p", "v", "u"):
+            values = np.asarray(getattr(self, name))
+            if not np.all(np.isfinite(values)):
+                return f"{name} has {int(np.size(values) - np.isfinite(values).sum())} NaN or infinite values"
+        return None
+
+    def reject_non_finite(self) -> None:
+        """Mark a solve that produced NaN/inf as failed (an "optimum" that is not a number is not one)."""
+        problem = self.non_finite()
+        if problem is not None and self.success:
+            self.status = SolveStatus.FAILED
+            self.message = f"non-finite solution at ε = {self.eps:g}: {problem}"
+
+    @property
+    def worse_than_baseline(self) -> bool:
+        """True when a converged solve costs more than not moving (u ≡ 0), a feasible plan: a poor local optimum."""
+        base = self.baseline.get("cost")
+        return bool(
+            self.success
+            and base is not None
+            and np.isfinite(base)
+            and self.cost > base * (1 + 1e-6)
+            and self.baseline_feasible
+        )
+
     @property
     def baseline_feasible(self) -> bool:
         """Whether the no-control baseline satisfies the problem's constraints (else no improvement is quoted)."""
@@ -252,7 +284,13 @@ class Solution:
             "sigma_positive_definite": self.min_sigma_eigenvalue > 0,
             "problem_hash": self.problem.digest(),
             "solver": self.problem.solver.model_dump(mode="json"),
+            "worse_than_baseline": self.worse_than_baseline,
         }
+        if self.worse_than_baseline:
+            out["warning"] = (
+                f"the optimum found (J = {self.cost:.6g}) costs more than not moving (no-control baseline "
+                f"J = {self.baseline['cost']:.6g}): a poor local optimum; try --multistart K"
+            )
         out.update(self.stats)
         return to_jsonable(out)
 
@@ -286,7 +324,7 @@ class Solution:
         """
         times = np.atleast_1d(np.asarray(t, dtype=float))
         t0, tf = float(self.t[0]), float(self.t[-1])
-        tol = 1e-12 * max(1.0, abs(tf - t0))
+        tol = 1e-12 * abs(tf - t0) + 8 * np.finfo(float).eps * max(abs(t0), abs(tf))
         if times.size and (times.min() < t0 - tol or times.max() > tf + tol):
             raise ValueError(f"t: expected times in [{t0:g}, {tf:g}], got [{times.min():g}, {times.max():g}]")
         times = np.clip(times, t0, tf)
@@ -313,7 +351,7 @@ class Solution:
         k = np.clip(np.ceil(scaled - 1e-9).astype(int) - 1, 0, K - 1)
         s = scaled - k
         node_times = t0 + h * (np.arange(K)[:, None] + colloc.tau[None, :])  # (K, d+1)
-        tol = 1e-9 * max(1.0, abs(tf - t0))
+        tol = 1e-9 * abs(tf - t0) / K + 8 * np.finfo(float).eps * max(abs(t0), abs(tf))
         index = np.clip(np.searchsorted(self.t, node_times - tol), 0, len(self.t) - 1)
         basis = colloc.interpolation_matrix(s, "all")  # (T, d+1)
         x_t = np.einsum("tj,tjx->tx", basis, x[index[k]])
@@ -363,10 +401,16 @@ class Solution:
 
     @classmethod
     def load(cls, path: str | Path) -> Solution:
-        """Load ``solution.nc`` (or a folder containing it)."""
-        from ..core.netcdf import open_dataset
+        """Load ``solution.nc`` (or a folder containing it); ``ConfigError`` (one line) if it is not one."""
+        with open_solution_file(path) as (ds, where):
+            try:
+                return cls.from_dataset(ds.load())
+            except ConfigError as exc:
+                raise ConfigError(f"{where}: {str(exc).split(': ', 1)[-1]}") from None
+            except (KeyError, ValueError, TypeError, IndexError, AttributeError, OSError, MemoryError) as exc:
+                raise ConfigError(f"{where}: not a solution written by mobisense solve ({brief_error(exc)})") from None
 
-        path = Path(path)
-        if path.is_dir():
-            path = path / "solution.nc"
-        return cls.from_dataset(open_dataset(path))
+    @staticmethod
+    def read_problem(path: str | Path) -> Problem:
+        """The problem stored in a ``solution.nc`` without loading its arrays (``ConfigError`` if unreadable)."""
+        return read_solution_problem(path)

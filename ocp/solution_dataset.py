@@ -17,6 +17,7 @@ import numpy as np
 import yaml
 
 from ..core.files import to_jsonable
+from ..core.reader import parse_document
 
 __all__ = ["VARIABLES", "COORDINATES", "solution_dataset", "solution_fields", "variable_attrs"]
 
@@ -127,7 +128,7 @@ def solution_fields(ds: Any) -> dict[str, Any]:
     }
     collocation = a.get("collocation_json")
     return {
-        "problem": yaml.safe_load(a["problem_yaml"]),
+        "problem": parse_document(str(a["problem_yaml"]), "solution.nc:problem_yaml"),
         "method": str(a["method"]),
         "status": str(a["status"]),
         "message": str(a["message"]),

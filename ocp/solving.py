@@ -41,11 +41,14 @@ def solve(
     Returns
     -------
     Solution
-        ``status`` tells whether ε = 1 was reached; a failed solve keeps what was solved.
+        ``status`` tells whether ε = 1 was reached; a failed solve keeps what was solved. A solution with
+        NaN or infinite values is never ``solved``.
     """
     if not isinstance(problem, Problem):
         problem = load_problem(problem)
     method = method or problem.solver.method
     if method not in METHODS:
         raise ConfigError(f"solver.method: {METHODS.unknown(method)}")
-    return METHODS[method](problem, progress=progress, init=init)
+    solution = METHODS[method](problem, progress=progress, init=init)
+    solution.reject_non_finite()
+    return solution

@@ -68,6 +68,20 @@ class FormationFile(StrictModel):
             offsets = arr - arr.mean(axis=0)
             if len(arr) < 3 or np.linalg.matrix_rank(offsets, tol=1e-9 * max(1.0, np.abs(offsets).max())) < 2:
                 raise InvalidValue("positions", f"expected >= 3 platforms not all on one line, got {self.positions}")
+        if self.formation == "cross" and self.bounds is not None:
+            from .steady_state import cross_information
+
+            n = self.noise
+            corners = [(a, b) for a in self.bounds.a for b in self.bounds.b]
+            try:
+                values = [cross_information(a, b, n.sigma_measurement, n.sigma_hessian) for a, b in corners]
+            except OverflowError:
+                values = [(float("inf"),) * 3]
+            if not all(np.isfinite(c) and 0 < c < 1e300 for triple in values for c in triple):
+                raise InvalidValue(
+                    "bounds", "the information C'(DUD' + R)⁻¹C of the cross overflows or vanishes at these bounds "
+                    "and noise levels (eq. steady_state.3: a⁴ σ3², a²/σ2²); choose bounds nearer the noise scales"
+                )  # fmt: skip
         if not 11 <= self.contour_resolution <= 1001:
             raise InvalidValue("contour_resolution", f"expected 11 … 1001, got {self.contour_resolution}")
         return self

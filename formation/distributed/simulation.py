@@ -21,7 +21,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from ...core.config import InvalidValue, NonNegativeFloat, PositiveFloat, StrictModel, Vector2
+from ...core.config import InvalidValue, NonNegativeFloat, PositiveFloat, Seed, StrictModel, Vector2
 from ...estimation.distributed.filter import DistributedFilter, FilterOptions, PdeModel
 from ...estimation.distributed.mesh import MeshError, SensorMesh
 from ...estimation.fields.advection_diffusion import AdvectionDiffusionField
@@ -117,7 +117,7 @@ class DistributedScenario(StrictModel):
 
     kind: Literal["distributed"] | None = Field(None, description="file kind (optional: 'network' tells it)")
     name: str = "distributed"
-    seed: int = 0
+    seed: Seed = 0
     time: TimeGrid = TimeGrid()
     field: AdvectionDiffusionSpec = AdvectionDiffusionSpec()
     noise: NoiseSpec = NoiseSpec()

@@ -29,7 +29,7 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import AfterValidator, Field, field_validator, model_validator
 
-from ...core.config import FiniteFloat, InvalidValue, NonNegativeFloat, PositiveFloat, StrictModel
+from ...core.config import FiniteFloat, InvalidValue, NonNegativeFloat, PositiveFloat, Seed, StrictModel
 from ...estimation.tracking.range_ring import KHEPERA_MOUNT_ANGLES_DEG, KHEPERA_PAIRS
 from ...estimation.tracking.switching_filter import MergeName
 from .controls import CONTROLS
@@ -237,7 +237,7 @@ class LeaderFollowerScenario(StrictModel):
     duration: PositiveFloat
     step: PositiveFloat
     gain: PositiveFloat = 1.0
-    seed: int = 0
+    seed: Seed = 0
     leader: LeaderConfig
     followers: Annotated[list[FollowerConfig], Field(min_length=1)]
     reference: ReferenceConfig

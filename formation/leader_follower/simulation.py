@@ -152,6 +152,11 @@ def _agent_inputs(
     return v, w
 
 
+#: most right-hand-side evaluations of one ``solve_ivp`` call (the shipped scenarios need ≤ 3·10⁴): a safety net
+#: behind the pre-flight time estimate (:mod:`mobisense.formation.sizes`) for dynamics too fast to integrate
+MAX_EVALUATIONS = 5_000_000
+
+
 def _integrate(
     problem: LeaderFollowerProblem,
     span: tuple[float, float],
@@ -160,7 +165,15 @@ def _integrate(
     held: list[tuple[float, float] | None],
     t_eval: np.ndarray | None = None,
 ):
+    evaluations = [0]
+
     def rates(t: float, s: np.ndarray) -> np.ndarray:
+        evaluations[0] += 1
+        if evaluations[0] > MAX_EVALUATIONS:
+            raise RuntimeError(
+                f"the integrator needed more than {MAX_EVALUATIONS:.0e} evaluations on [{span[0]:g}, {span[1]:g}] s: "
+                "the dynamics are too fast for the duration (speeds, turn rates or gains)"
+            )
         poses = s.reshape(-1, 3)
         v, w = _agent_inputs(problem, t, poses, reference_at, held)
         return unicycle_rates(poses, v, w).ravel()  # docs/theory/leader_follower.md, eq. leader_follower.1

@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from pydantic import Field
 
-from ...core.config import PositiveFloat, StrictModel, Vector2
+from ...core.config import PositiveFloat, Seed, StrictModel, Vector2
 from ...estimation import kalman
 from ..platforms import PlatformLimits, PlatformLimitsConfig, newton_rates
 from .reference import ReferenceTrajectory, TrackingController
@@ -84,7 +84,7 @@ class OcpReplayScenario(StrictModel):
         None, description="start offset of each sensor from its plan (L)"
     )
     monte_carlo: MonteCarloOptions = MonteCarloOptions()
-    seed: int = 0
+    seed: Seed = 0
 
 
 # ------------------------------------------------------------------------------------------- control

@@ -33,6 +33,7 @@ from ...core.config import (
     InvalidValue,
     NonNegativeFloat,
     PositiveFloat,
+    Seed,
     StrictModel,
     Vector2,
     parse_config,
@@ -333,7 +334,7 @@ class FieldReplayScenario(StrictModel):
     filter: FilterConfig
     duration: PositiveFloat
     time_step: PositiveFloat
-    seed: int = 0
+    seed: Seed = 0
     units: UnitsConfig = UnitsConfig()
     plot: PlotConfig = PlotConfig()
 

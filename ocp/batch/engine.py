@@ -17,34 +17,103 @@ from typing import Any
 
 import numpy as np
 
+from ...core.errors import ConfigError
+from ...core.interrupts import deferred_interrupts
+from .cluster import CONNECT_TIMEOUT
 from .worker import solve_task
 
 __all__ = ["open_client", "run_tasks", "nearest_seed"]
 
 
 @contextlib.contextmanager
-def open_client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
-    """A dask Client: on ``scheduler`` (``tcp://…``) or on a LocalCluster of ``workers`` processes."""
+def open_client(scheduler: str | None, workers: int | None, security: Any = None) -> Iterator[Any]:
+    """A dask Client: on ``scheduler`` (``tls://…``, ``tcp://…``) or on a LocalCluster of ``workers`` processes.
+
+    A scheduler that does not answer within :data:`CONNECT_TIMEOUT` seconds raises ``ConfigError``. Local
+    workers ignore SIGINT (:func:`mobisense.ocp.batch.worker.dask_setup`), so Ctrl-C stops the client, which
+    closes them, without a traceback from every worker.
+    """
     import os
+    import warnings
 
     import dask
     from dask.distributed import Client, LocalCluster
 
     if scheduler:
-        with Client(scheduler) as client:
+        try:
+            _probe(scheduler)
+            with deferred_interrupts(raise_at_exit=False) as deferred:
+                client = Client(scheduler, timeout=CONNECT_TIMEOUT, security=security)
+        except (OSError, TimeoutError, ValueError, TypeError, MemoryError) as exc:
+            reason = " ".join(str(exc).split())[:160] or type(exc).__name__
+            raise ConfigError(
+                f"--scheduler {scheduler[:80]}: cannot connect within {CONNECT_TIMEOUT:g} s ({reason}); check the "
+                "address, or leave out --scheduler to use local workers"
+            ) from None
+        with client:
+            deferred.check()
             yield client
         return
     n = workers or os.cpu_count() or 1
+    # the scheduler's HTTP server (no dashboard here) falls back to a free port when 8787 is taken: not news
+    warnings.filterwarnings("ignore", message="Port .* is already in use", category=UserWarning)
     # dask sets MALLOC_TRIM_THRESHOLD_ in its workers, which also freezes glibc's mmap threshold: MUMPS' large
     # per-factorisation workspaces then go through mmap/munmap and page faults. Unset it for our workers.
     with (
         dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}),
-        LocalCluster(
-            n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=50
-        ) as cluster,
-        Client(cluster) as client,
+        deferred_interrupts(raise_at_exit=False) as deferred,
     ):
+        cluster = LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=50,
+            preload=["mobisense.ocp.batch.worker"],  # its dask_setup: workers ignore Ctrl-C (the client stops them)
+        )
+        try:
+            client = Client(cluster)
+        except BaseException:
+            cluster.close()
+            raise
+    with cluster, client:
+        deferred.check()  # Ctrl-C or SIGTERM during the start: stop now, closing the cluster cleanly
         yield client
+
+
+def _probe(address: str) -> None:
+    """Connect to a scheduler's port within :data:`CONNECT_TIMEOUT` (``OSError``/``TimeoutError`` if not).
+
+    Over plain ``tcp://`` also read the first 8 bytes of the handshake (a frame length a real scheduler sends
+    at once), so that a port that accepts and never answers, or answers another protocol, is refused instead
+    of hanging the client.
+    """
+    import socket
+    import struct
+
+    scheme, _, rest = address.partition("://")
+    if scheme not in ("tcp", "tls"):
+        return
+    host, _, port = rest.rpartition(":")
+    host = host.strip("[]")
+    if not host or not port.isdigit():
+        raise ValueError(f"expected host:port, got {rest[:60]!r}")
+    deadline = time.monotonic() + CONNECT_TIMEOUT
+    with socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT) as sock:
+        if scheme != "tcp":
+            return
+        header = b""
+        while len(header) < 8:
+            sock.settimeout(max(0.01, deadline - time.monotonic()))
+            try:
+                chunk = sock.recv(8 - len(header))
+            except TimeoutError:
+                raise TimeoutError("the port accepts connections but sends no dask handshake") from None
+            if not chunk:
+                raise OSError("the connection was closed before a dask handshake")
+            header += chunk
+    if not 0 < struct.unpack("<Q", header)[0] < 2**20:
+        raise OSError("the port answers, but not with the dask protocol")
 
 
 def nearest_seed(seeds: list[tuple[Any, np.ndarray, dict]], key: Any, point: np.ndarray) -> dict | None:

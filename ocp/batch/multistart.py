@@ -30,9 +30,12 @@ def distinct_optima(solutions: list[Solution], rtol: float = 1e-6) -> list[dict[
 
 
 def solve_multistart(
-    problem: Problem, starts: int, scheduler: str | None = None, workers: int | None = None
+    problem: Problem, starts: int, scheduler: str | None = None, workers: int | None = None, security: Any = None
 ) -> Solution:
     """Solve from ``starts`` initial guesses through the dask engine; return the best, with the optima found.
+
+    ``scheduler`` (with dask ``security``) or ``workers`` local processes (default one per core, at most
+    ``starts``) run the starts.
 
     The returned solution's ``stats["multistart"]`` holds ``starts``, ``converged`` and ``optima``
     (one entry per distinct local optimum: cost, which starts reached it, final sensor positions).
@@ -49,7 +52,12 @@ def solve_multistart(
         else:
             errors.append(f"start {i}: {result['row'].get('error', '')}")
 
-    with open_client(scheduler, workers) as client:
+    if starts < 1:
+        raise ValueError(f"starts: expected >= 1, got {starts}")
+    import os
+
+    local = None if scheduler else min(starts, workers or os.cpu_count() or 1)
+    with open_client(scheduler, local, security) as client:
         run_tasks(client, payloads, on_result, warm_start=False)
     done = [s for s in solutions if s is not None]
     optima = distinct_optima(done)

@@ -8,35 +8,56 @@ Sweep file (paths relative to it)::
       cost.alpha: [0.001, 0.004, 0.016]
       sensors[0].p0: [[10, 10], [10, -10]]
 
-Every task's problem is validated before anything runs; an invalid key path or value is reported as one
-line naming the sweep file and the key (exit 2 in the CLI).
+Any value of the problem can be varied — numbers, lists, strings (``solver.collocation.scheme: [radau,
+legendre]``), whole mappings (noise models) — and a sweep has at most :data:`MAX_TASKS` tasks (counted before
+they are expanded). Every task's problem is validated before anything runs; an invalid key path or value is
+reported as one line naming the sweep file and the key (exit 2 in the CLI).
 """
 
 from __future__ import annotations
 
+import hashlib
 import itertools
-from dataclasses import dataclass
+import json
+import math
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 from pydantic import Field, field_validator
 
+from ...core.budget import PROCESS_BYTES, Estimate
 from ...core.config import ConfigError, StrictModel, load_config
+from ...core.errors import brief
 from ...core.keypath import get_path, parse_key_path, set_path
 from ..model import Structure
 from ..problem import Problem, load_problem
+from ..sizes import direct_estimate, solution_bytes
 
-__all__ = ["SweepSpec", "SweepTask", "load_sweep", "expand_sweep"]
+__all__ = [
+    "MAX_TASKS",
+    "SweepSpec",
+    "SweepTask",
+    "load_sweep",
+    "expand_sweep",
+    "task_count",
+    "sweep_estimates",
+    "sweep_digest",
+    "value_coordinates",
+]
+
+#: most tasks of one sweep (expanding and validating one takes ~4 ms: 10⁵ tasks ≈ 7 minutes)
+MAX_TASKS = 100_000
 
 
 class SweepSpec(StrictModel):
     """A sweep: base problem file, expansion mode and the values of each varied key path."""
 
     kind: Literal["sweep"] | None = Field(None, description="file kind (optional: a 'vary' key makes it a sweep)")
-    base: str = Field(description="the base problem file, relative to the sweep file")
+    base: str = Field(min_length=1, max_length=4096, description="the base problem file, relative to the sweep file")
     mode: Literal["grid", "zip"] = "grid"
-    vary: dict[str, list[Any]] = Field(min_length=1)
+    vary: dict[str, list[Any]] = Field(min_length=1, max_length=64)
 
     @field_validator("vary")
     @classmethod
@@ -56,7 +77,8 @@ class SweepTask:
     """One point of the sweep: its id (problem hash), position, varied values and full problem data.
 
     ``structure`` identifies the NLP layout (problem structure and collocation grid): tasks warm-start
-    each other only within one structure.
+    each other only within one structure. ``coords`` places the task's varied values in a space where the
+    nearest finished task is found (see :func:`value_coordinates`).
     """
 
     task: str
@@ -64,26 +86,63 @@ class SweepTask:
     values: dict[str, Any]
     problem: dict[str, Any]
     structure: tuple[Any, str]
+    coords: np.ndarray = field(default_factory=lambda: np.zeros(0), compare=False)
 
     def coordinates(self) -> np.ndarray:
-        """The varied values flattened to numbers (for nearest-neighbour warm starts)."""
-        flat: list[float] = []
-        for value in self.values.values():
-            flat.extend(float(v) for v in np.ravel(np.asarray(value, dtype=float)))
-        return np.asarray(flat)
+        """The varied values as numbers (for nearest-neighbour warm starts), shape (D,)."""
+        return self.coords
 
 
 def load_sweep(path: str | Path) -> tuple[SweepSpec, Problem]:
     """Read a sweep file and its base problem (relative to the sweep file)."""
     spec = load_config(path, SweepSpec)
-    base_path = (Path(path).parent / spec.base).resolve()
-    if not base_path.exists():
+    base_path = Path(path).parent / spec.base
+    if not base_path.is_file():
         raise ConfigError(f"{path}: base: file not found: {base_path}")
     return spec, load_problem(base_path)
 
 
+def task_count(spec: SweepSpec, source: str = "<sweep>") -> int:
+    """How many tasks ``spec`` expands to, without expanding it; ``ConfigError`` beyond :data:`MAX_TASKS`."""
+    lengths = {k: len(v) for k, v in spec.vary.items()}
+    if spec.mode == "zip":
+        if len(set(lengths.values())) > 1:
+            raise ConfigError(f"{source}: vary: mode 'zip' needs lists of equal length, got {lengths}")
+        count = next(iter(lengths.values()))
+    else:
+        count = math.prod(lengths.values())
+    if count > MAX_TASKS:
+        raise ConfigError(
+            f"{source}: vary: {count:.3g} tasks ({' × '.join(map(str, lengths.values()))}) is more than the "
+            f"{MAX_TASKS} a sweep may have; split it into several sweeps or use fewer values"
+        )
+    return count
+
+
+def sweep_estimates(spec: SweepSpec, base: Problem, local_workers: int, source: str = "<sweep>") -> list[Estimate]:
+    """Memory of a sweep, before expanding it: its tasks and results in this process, the local workers."""
+    tasks = task_count(spec, source)
+    per_task = 8 * len(json.dumps(base.normalised())) + 8 * len(json.dumps(spec.vary)) / max(1, tasks) + 2048
+    worker = direct_estimate(base)
+    return [
+        Estimate(f"the sweep's {tasks} tasks", tasks * per_task, "use fewer values or split the sweep"),
+        Estimate(
+            f"{local_workers} local worker processes, each solving {worker.what}",
+            local_workers * (PROCESS_BYTES + worker.bytes + solution_bytes(base)),
+            worker.hint + "; or fewer --workers",
+        ),
+        Estimate(  # warm-started tasks take a fraction of a cold solve: counted as a fifth
+            f"the sweep's {tasks} solves on {local_workers or 'the cluster'}'s workers",
+            0.0,
+            "use fewer values, split the sweep, or run it on a cluster (--scheduler)",
+            worker.seconds * tasks / 5 / local_workers if local_workers else 0.0,
+        ),
+    ]
+
+
 def expand_sweep(spec: SweepSpec, base: Problem, source: str = "<sweep>") -> list[SweepTask]:
     """All tasks of the sweep, each validated; raises :class:`ConfigError` naming the offending key."""
+    task_count(spec, source)
     data = base.normalised()
     for key in spec.vary:
         try:
@@ -92,27 +151,77 @@ def expand_sweep(spec: SweepSpec, base: Problem, source: str = "<sweep>") -> lis
             raise ConfigError(f"{source}: vary.{key}: not a key of the problem: {exc.args[0]}") from None
     keys = list(spec.vary)
     columns = [spec.vary[k] for k in keys]
-    if spec.mode == "zip":
-        lengths = {k: len(v) for k, v in spec.vary.items()}
-        if len(set(lengths.values())) > 1:
-            raise ConfigError(f"{source}: vary: mode 'zip' needs lists of equal length, got {lengths}")
-        combos = list(zip(*columns, strict=True))
-    else:
-        combos = list(itertools.product(*columns))
+    combos = zip(*columns, strict=True) if spec.mode == "zip" else itertools.product(*columns)
     tasks = []
     for index, combo in enumerate(combos):
         problem_data = data
         for key, value in zip(keys, combo, strict=True):
             problem_data = set_path(problem_data, key, value)
-        problem_data["name"] = f"{base.name}_{index:04d}"
+        problem_data["name"] = f"{base.name[:100]}_{index:04d}"
+        values = dict(zip(keys, combo, strict=True))
         try:
             problem = Problem.from_dict(problem_data, source=source)
         except ConfigError as exc:
             detail = str(exc).split(": ", 1)[1]
-            raise ConfigError(
-                f"{source}: vary (task {index}: {dict(zip(keys, combo, strict=True))}): {detail}"
-            ) from None
+            shown = ", ".join(f"{k}: {brief(v, 40)}" for k, v in values.items())
+            raise ConfigError(f"{source}: vary (task {index}: {{{shown}}}): {detail}") from None
         structure = (Structure.of(problem), problem.solver.collocation.model_dump_json())
-        values = dict(zip(keys, combo, strict=True))
         tasks.append(SweepTask(problem.digest(), index, values, problem.normalised(), structure))
-    return tasks
+    coords = value_coordinates([t.values for t in tasks])
+    return [SweepTask(t.task, t.index, t.values, t.problem, t.structure, c) for t, c in zip(tasks, coords, strict=True)]
+
+
+def sweep_digest(tasks: list[SweepTask]) -> str:
+    """SHA-256 (hex, 16 chars) of a sweep's tasks in order: equal iff the same problems are solved."""
+    text = "\n".join(f"{t.index}:{t.task}" for t in tasks)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _leaves(value: Any, prefix: str = "") -> dict[str, Any]:
+    """``{path: scalar}`` of a nested value: ``{"beta": 5, "p": [1, 2]}`` -> ``{".beta": 5, ".p[0]": 1, …}``."""
+    if isinstance(value, dict):
+        return {k: v for key, item in value.items() for k, v in _leaves(item, f"{prefix}.{key}").items()}
+    if isinstance(value, list):
+        return {k: v for i, item in enumerate(value) for k, v in _leaves(item, f"{prefix}[{i}]").items()}
+    return {prefix: value}
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+#: categorical values with up to this many distinct values get one 0/1 dimension each
+_ONE_HOT = 16
+
+
+def value_coordinates(values: list[dict[str, Any]]) -> list[np.ndarray]:
+    """Numbers for the varied values of each task, for nearest-neighbour warm starts; any YAML values.
+
+    Each scalar inside a varied value (a number, or an entry of a list or mapping) is one dimension when it
+    is a number in every task that has it (plus a 0/1 dimension marking the tasks without it); any other
+    scalar — strings, booleans, null, a number in some tasks only — becomes one 0/1 dimension per distinct
+    value (or, beyond 16 distinct values, one dimension holding the value's rank). Tasks of different
+    structure never warm-start each other anyway (see :class:`SweepTask`).
+    """
+    flat = [{f"{key}{path}": leaf for key, value in v.items() for path, leaf in _leaves(value).items()} for v in values]
+    paths = sorted({path for row in flat for path in row})
+    dims: list[np.ndarray] = []
+    for path in paths:
+        present = [path in row for row in flat]
+        items = [row.get(path) for row in flat]
+        if all(_is_number(x) for x, here in zip(items, present, strict=True) if here):
+            dims.append(np.array([float(x) if here else 0.0 for x, here in zip(items, present, strict=True)]))
+            if not all(present):
+                dims.append(np.array([float(here) for here in present]))
+            continue
+        labels = [json.dumps(x, sort_keys=True) if here else "" for x, here in zip(items, present, strict=True)]
+        distinct = sorted(set(labels))
+        if len(distinct) <= _ONE_HOT:
+            dims += [np.array([float(label == other) for other in labels]) for label in distinct]
+        else:  # many categories: their rank, so that the coordinates stay (tasks × a few)
+            rank = {label: i for i, label in enumerate(distinct)}
+            dims.append(np.array([float(rank[label]) for label in labels]))
+    if not dims:
+        return [np.zeros(1) for _ in values]
+    matrix = np.stack(dims, axis=1)
+    return list(matrix)

@@ -1,11 +1,20 @@
-"""Running a sweep into a result folder: resumable, one row per task, results written as tasks finish."""
+"""Running a sweep into a result folder: resumable, one row per task, results appended as tasks finish.
+
+Order of checks (nothing is run or written before the last): the sweep file and its base problem, the
+number of tasks (before expanding them), the memory budget, every task's problem, the output folder
+(usable, not locked by another run, empty or made by this same sweep), the results already there.
+"""
 
 from __future__ import annotations
 
+import time
+from contextlib import nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ...core.files import write_json, write_netcdf
+from ...core.interrupts import deferred_interrupts
 from .sweep import expand_sweep, load_sweep
 from .sweep_report import SweepProgress, sweep_summary
 
@@ -28,6 +37,10 @@ RESULT_COLUMNS = [
 ]
 #: task statuses that are final (not re-run on resume)
 DONE = ("solved", "failed")
+#: finished rows are appended to results.parquet in batches of at most this many rows …
+BATCH_ROWS = 64
+#: … or after this many seconds (and whenever the sweep ends, finished or interrupted)
+BATCH_SECONDS = 2.0
 
 
 @dataclass
@@ -56,6 +69,9 @@ def run_sweep(
     warm_start: bool = True,
     time_limit: float | None = None,
     quiet: bool = True,
+    security: Any = None,
+    max_memory: int | None = None,
+    max_time: float | None = None,
 ) -> SweepResult:
     """Validate a sweep file, run the tasks not finished in ``out`` before, and summarise.
 
@@ -64,80 +80,118 @@ def run_sweep(
     path : str or Path
         The sweep YAML file (see the module docstring).
     out : str or Path
-        Result folder: ``results.parquet`` (rewritten as each task finishes, so an interrupted sweep
-        resumes), ``tasks/<index>_<task>/solution.nc`` and ``summary.json``.
+        Result folder: ``results.parquet`` (a folder of parquet fragments, one appended per batch of finished
+        tasks, so an interrupted sweep resumes), ``sweep.json`` (which sweep made the folder),
+        ``tasks/<index>_<task>/solution.nc`` and ``summary.json``.
     scheduler : str, optional
-        Address of a running dask scheduler; default a local cluster of ``workers`` processes.
+        Address of a running dask scheduler (with dask ``security``); default a local cluster of ``workers``
+        processes.
     workers : int, optional
-        Local worker processes (default one per core).
+        Local worker processes (default one per core, at most one per task).
     warm_start : bool
         Warm-start each task from the nearest finished task of the same structure.
     time_limit : float, optional
         Wall-clock limit (s) of each Ipopt solve (sets ``solver.time_limit``).
     quiet : bool
         No progress display or table.
+    security : distributed.security.Security, optional
+        TLS settings for ``scheduler``.
+    max_memory : int, optional
+        Memory budget (bytes) checked before anything runs (default half of the RAM).
+    max_time : float, optional
+        Time budget (s) checked before anything runs (default one hour on the local workers).
 
     Raises
     ------
     ConfigError
-        The sweep file, its base problem or one of its tasks is invalid (nothing is run or written).
+        The sweep file, its base problem or one of its tasks is invalid, the sweep is too large for the
+        memory budget, ``out`` cannot be used or holds another sweep, or a results fragment is corrupt
+        (nothing is run or written).
     """
+    import os
+
     import pandas as pd
 
-    from ...core.files import write_json, write_netcdf
+    from ...core.budget import check_budget
+    from ...core.errors import ConfigError
+    from ...core.output import OutputFolder
     from .engine import open_client, run_tasks
+    from .results_store import ResultStore, check_manifest, value_kind, write_manifest
+    from .sweep import sweep_digest, sweep_estimates, task_count
 
-    path, out = Path(path), Path(out)
+    path, source = Path(path), str(path)
     spec, base = load_sweep(path)
     if time_limit is not None:
+        if not (isinstance(time_limit, (int, float)) and 0 < time_limit <= 1e9):
+            raise ConfigError(f"{source}: --time-limit: expected seconds in (0, 1e9], got {time_limit}")
         base = base.with_solver(time_limit=time_limit)
-    tasks = expand_sweep(spec, base, source=str(path))  # ConfigError -> nothing run or written
-    results_path = out / "results.parquet"
-    previous = {r["task"]: r for r in _read_existing(results_path)}
-    rows = {t: r for t, r in previous.items() if r["status"] in DONE}
-    todo = [t for t in tasks if t.task not in rows]
-    progress = SweepProgress(len(tasks), len(tasks) - len(todo), quiet=quiet)
+    count = task_count(spec, source)
+    local = 0 if scheduler else min(count, workers or os.cpu_count() or 1)
+    check_budget(sweep_estimates(spec, base, local, source), max_memory, source, max_time)
+    tasks = expand_sweep(spec, base, source=source)  # ConfigError -> nothing run or written
+    folder = OutputFolder.check(out)
+    digest = sweep_digest(tasks)
+    with folder.lock():
+        out = folder.path
+        resuming = check_manifest(out, digest, source)
+        store = ResultStore(out, {k: value_kind(v) for k, v in spec.vary.items()})
+        previous = store.read() if resuming else {}
+        rows = {t: r for t, r in previous.items() if r["status"] in DONE}
+        todo = [t for t in tasks if t.task not in rows]
+        batch = _Batch(store)
+        progress = SweepProgress(len(tasks), len(tasks) - len(todo), quiet=quiet)
 
-    def on_result(i: int, result: dict[str, Any]) -> None:
-        task = todo[i]
-        row = {"task": task.task, "index": task.index, **task.values}
-        row.update({c: None for c in RESULT_COLUMNS})
-        row.update(result["row"])
-        if "dataset" in result:
-            write_netcdf(out / "tasks" / f"{task.index:04d}_{task.task}" / "solution.nc", result["dataset"])
-        rows[task.task] = row
-        _write_rows(results_path, list(rows.values()))
-        progress.advance(row)
+        def on_result(i: int, result: dict[str, Any]) -> None:
+            task = todo[i]
+            row = {"task": task.task, "index": task.index, **task.values}
+            row.update({c: None for c in RESULT_COLUMNS})
+            row.update(result["row"])
+            with deferred_interrupts():  # a task's solution file and its row: both or neither
+                if "dataset" in result:
+                    write_netcdf(out / "tasks" / f"{task.index:04d}_{task.task}" / "solution.nc", result["dataset"])
+                rows[task.task] = row
+                batch.add(row, last=len(rows) == len(tasks))
+            progress.advance(row)
 
-    with progress:
-        if todo:
-            with open_client(scheduler, workers) as client:
-                run_tasks(
-                    client,
-                    [{"problem": t.problem} for t in todo],
-                    on_result,
-                    [t.structure for t in todo],
-                    [t.coordinates() for t in todo],
-                    warm_start=warm_start,
-                )
-    summary = sweep_summary(spec, tasks, list(rows.values()), resumed=len(tasks) - len(todo))
-    write_json(out / "summary.json", summary)
-    progress.report(summary, out)
+        connection = open_client(scheduler, min(local, len(todo)) or None, security) if todo else nullcontext()
+        with connection as client:  # ConfigError (scheduler unreachable) before anything is written
+            if not resuming:
+                write_manifest(out, digest, source, len(tasks), spec.mode, list(spec.vary))
+            try:
+                with progress:
+                    if todo:
+                        run_tasks(
+                            client,
+                            [{"problem": t.problem} for t in todo],
+                            on_result,
+                            [t.structure for t in todo],
+                            [t.coordinates() for t in todo],
+                            warm_start=warm_start,
+                        )
+            finally:
+                batch.flush()  # rows of finished tasks are kept however the run ends
+        store.compact()
+        summary = sweep_summary(spec, tasks, list(rows.values()), resumed=len(tasks) - len(todo))
+        write_json(out / "summary.json", summary)
+        progress.report(summary, out)
     table = pd.DataFrame(sorted(rows.values(), key=lambda r: r["index"]))
     return SweepResult(table, summary, out)
 
 
-def _read_existing(path: Path) -> list[dict[str, Any]]:
-    import pandas as pd
+class _Batch:
+    """Rows waiting to be appended: flushed every :data:`BATCH_ROWS` rows or :data:`BATCH_SECONDS` seconds."""
 
-    return pd.read_parquet(path).to_dict("records") if path.exists() else []
+    def __init__(self, store: Any) -> None:
+        self.store = store
+        self.rows: list[dict[str, Any]] = []
+        self.since = time.monotonic()
 
+    def add(self, row: dict[str, Any], last: bool = False) -> None:
+        self.rows.append(row)
+        if last or len(self.rows) >= BATCH_ROWS or time.monotonic() - self.since >= BATCH_SECONDS:
+            self.flush()
 
-def _write_rows(path: Path, rows: list[dict[str, Any]]) -> None:
-    import pandas as pd
-
-    from ...core.files import atomic_path
-
-    frame = pd.DataFrame(sorted(rows, key=lambda r: r["index"]))
-    with atomic_path(path) as tmp:
-        frame.to_parquet(tmp, index=False)
+    def flush(self) -> None:
+        rows, self.rows = self.rows, []
+        self.since = time.monotonic()
+        self.store.append(rows)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
-__all__ = ["solve_task", "worker_name"]
+__all__ = ["solve_task", "worker_name", "dask_setup"]
 
 
 def solve_task(payload: dict[str, Any]) -> dict[str, Any]:
@@ -34,6 +34,7 @@ def solve_task(payload: dict[str, Any]) -> dict[str, Any]:
         solution = solve_shooting(problem)
     else:
         solution = solve_direct(problem, init=payload.get("seed"), guess=guess)
+    solution.reject_non_finite()
     cached = transcription_cache_hits() > hits
     row = {
         "status": solution.status,
@@ -59,3 +60,17 @@ def worker_name() -> str:
         return str(get_worker().name)
     except (ImportError, ValueError):
         return "local"
+
+
+def dask_setup(worker: Any) -> None:
+    """Preload hook of local dask workers: ignore SIGINT.
+
+    Ctrl-C in a terminal goes to the whole process group; ignored by the workers, it reaches only the client,
+    which closes the cluster, and no worker prints a traceback.
+    """
+    import signal
+
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread of the worker process
+        pass

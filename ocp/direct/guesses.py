@@ -24,7 +24,9 @@ def state_grid(tr: DirectCollocation, t0: float, tf: float) -> tuple[np.ndarray,
     starts, nodes = tr.times(t0, tf)
     t_all = np.concatenate([starts, nodes.ravel()])
     order = np.argsort(t_all, kind="stable")
-    keep = np.concatenate([[True], np.diff(t_all[order]) > 1e-12 * max(1.0, abs(tf - t0))])
+    # equal up to rounding (an interval's end node and the next start): relative to the horizon, not absolute
+    tol = 1e-9 * (tf - t0) / tr.intervals + 8 * np.finfo(float).eps * max(abs(t0), abs(tf))
+    keep = np.concatenate([[True], np.diff(t_all[order]) > tol])
     return t_all[order][keep], order[keep]
 
 

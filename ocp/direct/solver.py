@@ -111,7 +111,14 @@ def solve_direct(
     values = tr.layout.values(problem)
     t_grid, order = state_grid(tr, t0, tf)
     coasting = coast(tr.model, tr.layout.pack(values), t_grid)
-    values["cost_scale"] = max(abs(coasting.cost), 1e-8)
+    if not (np.isfinite(coasting.cost) and np.all(np.isfinite(coasting.x))):
+        raise RuntimeError(
+            f"the no-control (coasting) solution is not finite (J = {coasting.cost:g}): the covariance or the cost "
+            "overflows over the horizon; rescale the problem"
+        )
+    # the NLP objective is J / cost_scale = O(1): the scale follows the cost however small (M SPD makes it > 0);
+    # an absolute floor would make tiny-cost problems (M = 1e-40) optimise the control energy alone
+    values["cost_scale"] = max(abs(coasting.cost), 1e-300)
     w0 = initial_guess(tr, coasting, tr.layout.pack(values))
     run = _Continuation(tr, values, w0, progress)
 

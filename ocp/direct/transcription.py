@@ -34,6 +34,8 @@ __all__ = [
     "transcription_for",
     "transcription_cache_hits",
     "clear_transcription_cache",
+    "TranscriptionSize",
+    "transcription_size",
 ]
 
 #: Ipopt options used by default. MUMPS' matching-based permutation and scaling are switched off and the
@@ -78,6 +80,42 @@ class NLPResult:
     iterations: int
     time_s: float
     g: np.ndarray
+
+
+@dataclass(frozen=True)
+class TranscriptionSize:
+    """Sizes of the NLP :class:`DirectCollocation` would build, computed without building it.
+
+    ``variables`` and ``constraints`` are exact; ``jacobian_nnz`` and ``hessian_nnz`` (lower triangle of the
+    Lagrangian Hessian) count the structural non-zeros of one collocation node times the nodes, and
+    ``expression_nodes`` the SX nodes of the expanded NLP plus its Jacobian and Hessian functions, fitted to
+    CasADi's counts for n = 1…10 states, N = 1…32 sensors, d = 3…9 (within −27 % … +30 %, mostly +10 %).
+    """
+
+    variables: int
+    constraints: int
+    jacobian_nnz: int
+    hessian_nnz: int
+    expression_nodes: int
+
+
+def transcription_size(structure: Structure, degree: int, intervals: int) -> TranscriptionSize:
+    """The :class:`TranscriptionSize` of the transcription of ``structure`` on ``intervals`` intervals of ``degree``."""
+    s, d, K = structure, degree, intervals
+    n, N, nx, nu, ns = s.n, s.N, s.nx, s.nu, s.n_sigma
+    nodes = K * d
+    bounded = sum(s.bounded_control)
+    terminal = 2 * (sum(s.fixed_position) + sum(s.fixed_velocity))
+    variables = K * (nx + nx * d + nu * d) + nx
+    constraints = nodes * nx + K * nx + nx + terminal + nodes * bounded
+    # a covariance residual depends on its node's slope (d + 1 values), a row and a column of Σ and every
+    # sensor position (through S(p)); a position/velocity residual on its slope and one velocity/control
+    jacobian = nodes * (ns * (d + 1 + 2 * n + 2 * N) + 4 * N * (d + 2) + 2 * bounded) + K * nx * (d + 2) + nx + terminal
+    # Σ S(p) Σ couples every pair of covariance entries (S is a parameter, dense), and each sensor's
+    # position with every covariance entry; controls enter quadratically
+    hessian = nodes * (ns * (ns + 1) // 2 + 2 * N * ns + 5 * N)
+    expression = nodes * (30 + 4 * d * nx + (180 * n**2 + 60) * N + 12 * n**3 + 24 * ns**2)
+    return TranscriptionSize(variables, constraints, jacobian, hessian, expression)
 
 
 class DirectCollocation:

@@ -102,7 +102,7 @@ def test_no_plot_writes_no_figures(tmp_path: Path) -> None:
         (
             "leader_follower_control1.yaml",
             lambda d: d["reference"].update(bearing=1.6),
-            "reference.constant.bearing: expected |bearing| < pi/2",
+            "reference.bearing: expected |bearing| < pi/2",
         ),
         ("leader_follower_control1.yaml", lambda d: d.update(gian=2.0), "gian: unknown key; did you mean 'gain'?"),
         ("leader_follower_control1.yaml", lambda d: d.update(step=0.03), "step: expected a divisor of duration"),
@@ -126,7 +126,7 @@ def test_no_plot_writes_no_figures(tmp_path: Path) -> None:
         (
             "leader_follower_khepera.yaml",
             lambda d: d["sensing"].update(pairs=[[1, 9]]),
-            "sensing.ring.pairs[0]: expected two different sensor numbers in 1..8",
+            "sensing.pairs[0]: expected two different sensor numbers in 1..8",
         ),
     ],
 )

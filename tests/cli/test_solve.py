@@ -96,7 +96,7 @@ BAD_INPUTS = [
     ("process.locations", _mutate(["process", "locations"], [[0.0, 0.0], [1.0, 1.0]]), "one per state"),
     ("sensors[0].p0", lambda d: (d["sensors"][0].update(p0=[1.0, 2.0, 3.0]), d)[1], "length 2"),
     ("sensors[0].noise.beta", lambda d: (d["sensors"][0]["noise"].update(beta=0.0), d)[1], "> 0"),
-    ("sensors[0].noise", lambda d: (d["sensors"][0]["noise"].update(model="cubic"), d)[1], "unknown noise model"),
+    ("sensors[0].noise.model", lambda d: (d["sensors"][0]["noise"].update(model="cubic"), d)[1], "unknown noise model"),
     ("sensors[0].measures", lambda d: (d["sensors"][0].update(measures=[[1.0, 0.0]]), d)[1], "length n = 1"),
     ("sensors[1].name", lambda d: (d["sensors"].append(dict(d["sensors"][0])), d)[1], "duplicate"),
     ("horizon.tf", _mutate(["horizon", "tf"], -1.0), "tf > t0"),

@@ -174,7 +174,8 @@ def test_cli_custom_formation_and_invalid_files(tmp_path: Path, capsys: pytest.C
     assert summary["trace"] == pytest.approx(expected.trace, rel=1e-12)
     bad = {
         "typo.yaml": ("formation: cross\nnoise: {sigma_process: 0.1, sigma_measurment: 0.5}\n"
-                      "bounds: {a: [0.2, 3.0], b: [0.2, 3.0]}\n", "noise.sigma_measurement"),
+                      "bounds: {a: [0.2, 3.0], b: [0.2, 3.0]}\n",
+                      "noise.sigma_measurment: unknown key; did you mean 'sigma_measurement'"),
         "order.yaml": ("formation: cross\nnoise: {sigma_process: 0.1, sigma_measurement: 0.5}\n"
                        "bounds: {a: [3.0, 0.2], b: [0.2, 3.0]}\n", "bounds.a: expected [min, max]"),
         "line.yaml": ("formation: custom\nnoise: {sigma_process: 0.1, sigma_measurement: 0.5}\n"

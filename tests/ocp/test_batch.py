@@ -92,28 +92,35 @@ def test_grid_sweep_equals_single_solves_and_resumes(sweep_file, tmp_path, capsy
 
 
 def test_interrupted_sweep_resumes_without_recomputing(sweep_file, tmp_path, monkeypatch):
+    import mobisense.ocp.batch.results_store as store
     import mobisense.ocp.batch.sweep_runner as command
 
     out = tmp_path / "out"
-    real_write = command._write_rows
-    writes = {"n": 0}
+    monkeypatch.setattr(command, "BATCH_ROWS", 1)  # one fragment per finished task
+    real_append = store.ResultStore.append
+    appended = []
 
-    def interrupt_after_four(path, rows):
-        real_write(path, rows)
-        writes["n"] += 1
-        if writes["n"] == 4:
+    def interrupt_after_four(self, rows):
+        real_append(self, rows)
+        appended.extend(rows)
+        if len(appended) == 4:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(command, "_write_rows", interrupt_after_four)
+    monkeypatch.setattr(store.ResultStore, "append", interrupt_after_four)
     assert cli.main(["sweep", str(sweep_file), "--out", str(out), "--workers", "2", "--quiet"]) == 130
     assert len(pd.read_parquet(out / "results.parquet")) == 4
-    monkeypatch.setattr(command, "_write_rows", real_write)
-    computed = []
-    monkeypatch.setattr(command, "_write_rows", lambda p, r: (computed.append(1), real_write(p, r)))
+    calls = []
+
+    def count(self, rows):
+        calls.append(len(rows))
+        real_append(self, rows)
+
+    monkeypatch.setattr(store.ResultStore, "append", count)
     assert cli.main(["sweep", str(sweep_file), "--out", str(out), "--workers", "2", "--quiet"]) == 0
-    assert len(computed) == 5  # only the five unfinished tasks ran
+    assert calls == [1, 1, 1, 1, 1, 9]  # only the five unfinished tasks ran; then the fragments are compacted
     summary = json.loads((out / "summary.json").read_text())
     assert summary["counts"]["resumed"] == 4 and summary["counts"]["solved"] == 9
+    assert len(list((out / "results.parquet").glob("*.parquet"))) == 1  # compacted into one fragment
 
 
 def test_killed_worker_does_not_lose_tasks():

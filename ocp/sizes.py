@@ -1,0 +1,130 @@
+"""Memory estimates of solving a problem from its sizes alone, for the pre-flight budget (:mod:`mobisense.core.budget`).
+
+The direct method's peak is CasADi's expanded NLP with its Jacobian and Hessian functions (≈ 140–260 bytes
+per SX node, measured for n = 1…10 states and N = 1…64 sensors, K = 10…1600 intervals, d = 1…9) plus Ipopt's
+KKT matrices and MUMPS factors (counted per structural non-zero); a continuation builds a second, warm-started
+solver (measured 1.6× the memory of one). Against the peak RSS measured for 20 sizes the estimate is
+0.8–1.6×. The counts come from :func:`mobisense.ocp.direct.transcription.transcription_size`.
+The indirect method's collocation BVP has the same symbolic functions on its own mesh, and a sparse LU
+whose fill stays within each interval's block.
+"""
+
+from __future__ import annotations
+
+from ..core.budget import PROCESS_BYTES, Estimate
+from .direct.transcription import transcription_size
+from .homotopy import fixed_schedule
+from .model import Structure
+from .problem import Problem
+
+__all__ = ["BYTES_PER_NODE", "BYTES_PER_NONZERO", "direct_estimate", "indirect_estimate", "solution_bytes",
+           "problem_estimates"]  # fmt: skip
+
+#: resident memory per SX node of the expanded NLP and its derivative functions (upper end of 137–260 measured)
+BYTES_PER_NODE = 200
+#: Ipopt + MUMPS memory per structural non-zero of the constraint Jacobian and Lagrangian Hessian
+BYTES_PER_NONZERO = 600
+#: lower estimates of the time: building per SX node (5 µs measured on a loaded core), and one Ipopt iteration
+#: per non-zero (a continuation step takes ≥ 15 iterations cold, fewer warm)
+SECONDS_PER_NODE = 1e-6
+SECONDS_PER_NONZERO_ITERATION = 5e-8
+_SMALLER = "use fewer intervals (--intervals), a lower degree (--degree), or fewer states or sensors"
+
+
+def _steps(problem: Problem) -> int:
+    h = problem.solver.homotopy
+    return 1 if h.mode == "none" else len(fixed_schedule(h.step)) if h.mode == "fixed" else int(4 / h.step) + 1
+
+
+def solution_bytes(problem: Problem) -> float:
+    """Bytes of a :class:`~mobisense.ocp.solution.Solution` (states, costates, homotopy path) and its dataset."""
+    c = problem.solver.collocation
+    s = Structure.of(problem)
+    times = c.intervals * (c.degree + 1) + 1
+    path = min(_steps(problem), 1000)
+    return 2 * 8.0 * times * s.nx * (3 + path)
+
+
+def direct_estimate(problem: Problem, intervals: int | None = None) -> Estimate:
+    """Peak memory of :func:`mobisense.ocp.direct.solver.solve_direct` on ``problem``."""
+    c = problem.solver.collocation
+    K = intervals or c.intervals
+    size = transcription_size(Structure.of(problem), c.degree, K)
+    solvers = 1.0 if problem.solver.homotopy.mode == "none" else 1.7  # the warm solver: 1.6× measured
+    nonzeros = size.jacobian_nnz + size.hessian_nnz
+    need = solvers * (BYTES_PER_NODE * size.expression_nodes + BYTES_PER_NONZERO * nonzeros)
+    iterations = 5 * _steps(problem)
+    seconds = solvers * SECONDS_PER_NODE * size.expression_nodes + iterations * nonzeros * SECONDS_PER_NONZERO_ITERATION
+    what = (
+        f"the direct-collocation NLP ({size.variables:.3g} variables, {size.jacobian_nnz + size.hessian_nnz:.3g} "
+        f"Jacobian and Hessian non-zeros: n = {problem.n} states, N = {problem.N} sensors, K = {K} intervals, "
+        f"d = {c.degree})"
+    )
+    return Estimate(what, need + solution_bytes(problem), _SMALLER, seconds)
+
+
+def indirect_estimate(problem: Problem) -> Estimate:
+    """Peak memory of the indirect method: the collocation BVP (Newton, sparse LU) and ``solve_bvp``."""
+    c, bvp = problem.solver.collocation, problem.solver.bvp
+    K = bvp.intervals or c.intervals
+    s = Structure.of(problem)
+    ny = 2 * s.nx
+    direct = direct_estimate(problem, intervals=K)
+    symbolic = direct.bytes
+    lu = 16.0 * K * (ny * (c.degree + 1)) ** 2
+    nodes = min(bvp.max_nodes, 10 * (K * c.degree + 1))
+    scipy_bvp = 3 * 8.0 * nodes * ny * ny
+    what = (
+        f"the indirect method's BVP ({ny} unknowns per node: n = {problem.n} states, N = {problem.N} sensors, "
+        f"{K} intervals, up to {nodes} solve_bvp nodes)"
+    )
+    return Estimate(what, symbolic + lu + scipy_bvp, _SMALLER + ", or solver.bvp.max_nodes", direct.seconds)
+
+
+def shooting_estimate(problem: Problem) -> Estimate:
+    """Peak memory of the reduced-space shooting method (:func:`mobisense.ocp.field.shooting_memory_bytes`)."""
+    from .field import shooting_memory_bytes, shooting_substeps
+
+    o, n = problem.solver.shooting, problem.n
+    noise = [s.noise.parameters()[0] for s in problem.sensors]
+    m = o.substeps or shooting_substeps(problem.process.field, noise, problem.horizon.tf - problem.horizon.t0,
+                                        o.intervals)  # fmt: skip
+    solution = 3 * 8.0 * (o.intervals + 1) * n * n  # Σ(t), its copy in the dataset and the baseline
+    what = f"the shooting NLP (n = {n} field states, N = {problem.N} sensors, K = {o.intervals}, m = {m})"
+    return Estimate(what, shooting_memory_bytes(n, o.intervals, m) + solution,
+                    "use a coarser grid or fewer intervals (solver.shooting.intervals)")  # fmt: skip
+
+
+def problem_estimates(
+    problem: Problem, method: str | None = None, starts: int = 1, local_workers: int = 0
+) -> list[Estimate]:
+    """What solving ``problem`` needs: by ``method`` (default the problem's), ``starts`` multi-start solutions.
+
+    Parameters
+    ----------
+    problem : Problem
+    method : str, optional
+        ``direct``, ``indirect`` or ``both``.
+    starts : int
+        Solutions held at once (multi-start keeps every start's solution).
+    local_workers : int
+        Local dask worker processes, each solving one start at a time (0: the solve runs in this process).
+    """
+    method = method or problem.solver.method
+    parts = []
+    if method == "shooting":
+        parts.append(shooting_estimate(problem))
+    if method in ("direct", "both"):
+        parts.append(direct_estimate(problem))
+    if method in ("indirect", "both"):
+        parts.append(indirect_estimate(problem))
+    if local_workers:
+        worker = parts[0]
+        parts = [
+            Estimate(f"{local_workers} worker processes, each solving {worker.what}",
+                     local_workers * (PROCESS_BYTES + worker.bytes), worker.hint + "; or fewer --workers",
+                     worker.seconds * starts / local_workers),
+        ]  # fmt: skip
+    if starts > 1:
+        parts.append(Estimate(f"{starts} multi-start solutions", starts * solution_bytes(problem), "fewer starts"))
+    return parts

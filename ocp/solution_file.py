@@ -1,0 +1,55 @@
+"""Reading a ``solution.nc`` safely: a missing, oversized or non-netCDF file is a one-line ``ConfigError``."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from ..core.errors import ConfigError, one_line
+from ..core.reader import parse_document
+from .problem import Problem
+
+__all__ = ["brief_error", "open_solution_file", "read_solution_problem"]
+
+
+def brief_error(exc: BaseException) -> str:
+    """``Type: message`` of an exception on one line, at most 120 characters."""
+    return one_line(f"{type(exc).__name__}: {exc}", 120)
+
+
+@contextmanager
+def open_solution_file(path: str | Path) -> Iterator[tuple[Any, Path]]:
+    """Open a solution netCDF lazily: refuse a missing file, a file larger than the memory budget, non-netCDF data."""
+    import xarray as xr
+
+    from ..core.budget import default_memory_limit, format_bytes
+
+    path = Path(path)
+    if path.is_dir():
+        path = path / "solution.nc"
+    if not path.is_file():
+        raise ConfigError(f"{path}: file not found")
+    size = path.stat().st_size
+    if size > default_memory_limit():
+        raise ConfigError(f"{path}: {format_bytes(size)} is more than the memory budget allows to load")
+    try:
+        with open(path, "rb") as f:
+            magic = f.read(8)
+        if not magic.startswith((b"\x89HDF\r\n\x1a\n", b"CDF")):
+            raise ValueError("neither HDF5 nor netCDF data")
+        ds = xr.open_dataset(path, engine="h5netcdf")
+    except (OSError, ValueError, TypeError, KeyError, RuntimeError) as exc:
+        raise ConfigError(f"{path}: not a netCDF solution written by mobisense solve ({brief_error(exc)})") from None
+    with ds:
+        yield ds, path
+
+
+def read_solution_problem(path: str | Path) -> Problem:
+    """The problem stored in a ``solution.nc`` (its ``problem_yaml`` attribute), without loading the arrays."""
+    with open_solution_file(path) as (ds, where):
+        if "problem_yaml" not in ds.attrs:
+            raise ConfigError(f"{where}: not a solution written by mobisense solve (no problem_yaml attribute)")
+        text = str(ds.attrs["problem_yaml"])
+    return Problem.from_dict(parse_document(text, f"{where}:problem_yaml"), source=f"{where}:problem_yaml")

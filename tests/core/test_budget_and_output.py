@@ -1,0 +1,88 @@
+"""The pre-flight budget (sizes, limits, estimates against CasADi's counts) and output folders (checks, lock)."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+from reference_problems import hussein2008
+
+from mobisense.core.budget import Estimate, check_budget, default_memory_limit, parse_duration, parse_size
+from mobisense.core.config import ConfigError
+from mobisense.core.output import LOCK_NAME, OutputFolder, default_output_folder
+
+
+def test_sizes_and_durations():
+    assert parse_size("4G") == 4 * 2**30 and parse_size("512M") == 512 * 2**20 and parse_size("2.5GiB") == 2.5 * 2**30
+    assert parse_duration("90") == 90 and parse_duration("30m") == 1800 and parse_duration("2h") == 7200
+    for bad in ("lots", "-1G", "10K", ""):
+        with pytest.raises(ValueError):
+            parse_size(bad)
+    with pytest.raises(ValueError):
+        parse_duration("0.1s")
+
+
+def test_budget_refuses_with_what_and_how():
+    check_budget([Estimate("small", 1e6)], limit=2**30)
+    with pytest.raises(ConfigError, match=r"f\.yaml: too large: big needs about .* GiB .* 1 GiB allowed .*; shrink it"):
+        check_budget([Estimate("big", 8 * 2**30, "shrink it")], limit=2**30, source="f.yaml")
+    with pytest.raises(ConfigError, match=r"too long: slow would compute for at least 2 h, more than the 1 h"):
+        check_budget([Estimate("slow", 0.0, "", 7200.0)], limit=2**30)
+    assert 0 < default_memory_limit() <= os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2
+
+
+def test_transcription_size_matches_the_built_nlp():
+    from mobisense.ocp.direct.transcription import transcription_for, transcription_size
+    from mobisense.ocp.model import Structure
+    from mobisense.ocp.problem import Problem
+
+    data = hussein2008(collocation={"intervals": 5})
+    data["sensors"].append({**data["sensors"][0], "name": "s2", "p0": [-5.0, 3.0], "u_max": 2.0})
+    problem = Problem.from_dict(data)
+    tr = transcription_for(problem)
+    size = transcription_size(Structure.of(problem), 3, 5)
+    assert (size.variables, size.constraints) == (tr.nw, tr.ng)  # exact
+    solver = tr._solver(False)
+    jacobian = solver.get_function("nlp_jac_g").sparsity_out(1).nnz()
+    hessian = solver.get_function("nlp_hess_l").sparsity_out(0).nnz()
+    # structural upper estimates: CasADi's patterns are at most these, and not far below (measured ≤ +25 %)
+    assert jacobian <= size.jacobian_nnz <= 1.5 * jacobian
+    assert hessian <= size.hessian_nnz <= 1.5 * hessian
+
+
+def test_output_folder_checks(tmp_path):
+    (tmp_path / "file").write_text("x")
+    (tmp_path / "dangling").symlink_to(tmp_path / "nowhere")
+    for path, words in ((tmp_path / "file", "not a folder"), (tmp_path / "file" / "x", "which is a file"),
+                        (tmp_path / "dangling", "symbolic link"), (tmp_path / "dangling" / "x", "dangling"),
+                        ("/proc/self/x", "virtual file system")):  # fmt: skip
+        with pytest.raises(ConfigError, match=words):
+            OutputFolder.check(path)
+    assert not (tmp_path / "new").exists()
+    OutputFolder.check(tmp_path / "new" / "deeper")  # creates nothing
+    assert not (tmp_path / "new").exists()
+
+
+def test_lock_is_exclusive_cleans_temporaries_and_leaves_nothing_on_invalid_input(tmp_path):
+    out = tmp_path / "a" / "b"
+    with OutputFolder.check(out).lock():
+        assert (out / LOCK_NAME).read_text().strip() == str(os.getpid())
+        with pytest.raises(ConfigError, match=f"in use by another mobisense run \\(pid {os.getpid()}\\)"):
+            with OutputFolder.check(out).lock():
+                pass
+    assert not (out / LOCK_NAME).exists()
+    (out / ".summary.json.abcd1234.tmp").write_text("half")
+    (out / ".keep.tmp").write_text("not ours")
+    with OutputFolder.check(out).lock():
+        assert not (out / ".summary.json.abcd1234.tmp").exists() and (out / ".keep.tmp").exists()
+    fresh = tmp_path / "fresh" / "out"
+    with pytest.raises(ConfigError):
+        with OutputFolder.check(fresh).lock():
+            raise ConfigError("found late")
+    assert not (tmp_path / "fresh").exists()
+
+
+def test_default_output_folder_is_sanitised():
+    assert str(default_output_folder("problems/hussein2008.yaml")) == "out/hussein2008"
+    assert str(default_output_folder("..yaml")) == "out/output"
+    assert str(default_output_folder("a b/../c;rm -rf.yaml")) == "out/c_rm_-rf"

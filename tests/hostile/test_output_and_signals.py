@@ -1,0 +1,257 @@
+"""Hostile output folders, concurrent writers, full disks and signals: nothing lost, nothing half-written.
+
+- ``--out`` that cannot be used (a file, under a file, a dangling symbolic link, ``/proc``, read-only) → exit 2
+  before any work, nothing created;
+- a second writer into a locked folder → exit 2 naming the holder's pid;
+- temporary files and locks of a run killed with SIGKILL → removed by the next run;
+- a full disk (a small tmpfs, where this machine allows ``mount``) → exit 1, the previous files intact;
+- SIGINT / SIGTERM → exit 130 and one line; SIGKILL then re-run → a complete result, no temporary file.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import hashlib
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+from hostile.harness import GOOD, RECORD, Outcome, attack, classify, finish, start, temporaries
+from hostile.inputs import KINDS, small_problem
+
+pytestmark = pytest.mark.slow  # each case starts a Python process (~1 s); some solve or sweep for seconds
+
+WRITERS = [k for k, kind in KINDS.items() if kind.writes]
+
+
+def _bad_outs(tmp_path: Path) -> dict[str, tuple[Path, str]]:
+    (tmp_path / "a_file").write_text("x")
+    (tmp_path / "dangling").symlink_to(tmp_path / "nowhere")
+    return {
+        "an existing file": (tmp_path / "a_file", "not a folder"),
+        "a path under a file": (tmp_path / "a_file" / "out", "which is a file"),
+        "a dangling symbolic link": (tmp_path / "dangling", "symbolic link"),
+        "/proc": (Path("/proc/self/mobisense_out"), "virtual file system"),
+    }
+
+
+@pytest.mark.parametrize("where", ["an existing file", "a path under a file", "a dangling symbolic link", "/proc"])
+@pytest.mark.parametrize("kind_name", WRITERS)
+def test_unusable_out_is_refused_before_any_work(tmp_path, kind_name, where):
+    kind = KINDS[kind_name]
+    path = kind.write(tmp_path)
+    out, words = _bad_outs(tmp_path)[where]
+    before = sorted(p.name for p in tmp_path.iterdir())
+    outcome = attack(kind.name, kind.command(path, out), tmp_path, 2, ("--out", words), None, limit=30)
+    assert outcome.verdict in GOOD, outcome.problems
+    assert outcome.seconds < 10  # checked before any work (the interpreter and the imports take ~1 s)
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def _mount_tmpfs(path: Path, size: str, read_only: bool = False) -> None:
+    path.mkdir()
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)], capture_output=True)
+    if done.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here ({done.stderr.decode(errors='replace').strip()[:80]})")
+    if read_only:
+        subprocess.run(["mount", "-o", "remount,ro", str(path)], check=True)
+
+
+@pytest.fixture()
+def tmpfs(tmp_path):
+    mounted: list[Path] = []
+
+    def make(name: str, size: str, read_only: bool = False) -> Path:
+        path = tmp_path / name
+        _mount_tmpfs(path, size, read_only)
+        mounted.append(path)
+        return path
+
+    yield make
+    for path in mounted:
+        subprocess.run(["umount", "-l", str(path)], capture_output=True)
+
+
+@pytest.mark.parametrize("kind_name", ["solve", "sweep", "simulate distributed"])
+def test_read_only_out_is_refused(tmp_path, tmpfs, kind_name):
+    kind = KINDS[kind_name]
+    path = kind.write(tmp_path)
+    disk = tmpfs("ro", "1m", read_only=True)
+    outcome = attack(kind.name, kind.command(path, disk / "out"), tmp_path, 2, ("--out", "not writable"), None)
+    assert outcome.verdict in GOOD, outcome.problems
+
+
+def test_full_disk_keeps_the_previous_result(tmp_path, tmpfs):
+    kind = KINDS["solve"]
+    path = kind.write(tmp_path)
+    disk = tmpfs("disk", "3m")
+    out = disk / "out"
+    first = attack("solve", kind.command(path, out), tmp_path, 0, (), out)
+    assert first.verdict in GOOD, first.problems
+    digest = hashlib.sha256((out / "solution.nc").read_bytes()).hexdigest()
+    filler = os.open(disk / "filler", os.O_WRONLY | os.O_CREAT)
+    for chunk in (65536, 4096, 1):  # fill the disk to the last byte
+        try:
+            while True:
+                os.write(filler, b"\0" * chunk)
+        except OSError:
+            pass
+    os.close(filler)
+    second = attack("solve", kind.command(path, out), tmp_path, 1, ("No space left on device", "unchanged"), out)
+    assert second.verdict in GOOD, second.problems
+    assert hashlib.sha256((out / "solution.nc").read_bytes()).hexdigest() == digest
+    assert temporaries(disk) == []
+
+
+def test_second_writer_is_refused_naming_the_holder(tmp_path):
+    kind = KINDS["solve"]
+    path = kind.write(tmp_path)
+    out = tmp_path / "out_locked"
+    out.mkdir()
+    holder = subprocess.Popen(["sleep", "60"])
+    lock = os.open(out / ".mobisense.lock", os.O_RDWR | os.O_CREAT)
+    try:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        os.write(lock, f"{holder.pid}\n".encode())
+        outcome = attack("solve", kind.command(path, out), tmp_path, 2, ("in use by another mobisense run",
+                                                                           f"pid {holder.pid}"), None,
+                         others=(out / ".mobisense.lock",))  # fmt: skip
+        assert outcome.verdict in GOOD, outcome.problems
+        assert not (out / "solution.nc").exists()
+    finally:
+        os.close(lock)
+        holder.kill()
+        holder.wait()
+
+
+def test_two_concurrent_solves_into_one_folder(tmp_path):
+    kind = KINDS["solve"]
+    data = small_problem()
+    data["solver"]["collocation"]["intervals"] = 200
+    path = kind.write(tmp_path, data)
+    out = tmp_path / "shared"
+    first = start(kind.command(path, out), tmp_path)
+    deadline = time.monotonic() + 30
+    while not (out / ".mobisense.lock").exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    second = attack("solve", kind.command(path, out), tmp_path, 2, ("in use by another mobisense run",), None,
+                    others=(out / ".mobisense.lock",))
+    code, _, err, _ = finish(first, 120)
+    assert second.verdict in GOOD, second.problems
+    assert code == 0, err
+    assert temporaries(tmp_path) == []
+
+
+def test_stale_temporaries_of_a_killed_run_are_removed(tmp_path):
+    kind = KINDS["solve"]
+    path = kind.write(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / ".solution.nc.k2j4h5g6.tmp").write_bytes(b"half a file")
+    (out / ".mobisense.lock").write_text("99999999\n")  # its holder is gone: the lock is free
+    outcome = attack("solve", kind.command(path, out), tmp_path, 0, (), out)
+    assert outcome.verdict in GOOD, outcome.problems
+    assert (out / "solution.nc").exists() and temporaries(tmp_path) == []
+
+
+def test_default_out_is_the_sanitised_file_stem(tmp_path):
+    kind = KINDS["solve"]
+    path = kind.write(tmp_path)
+    odd = path.rename(tmp_path / "..yaml")
+    outcome = attack("solve", kind.args + [str(odd)], tmp_path, 0, (), None)
+    assert outcome.verdict in GOOD, outcome.problems
+    assert (tmp_path / "out" / "output" / "solution.nc").exists()
+    assert not (tmp_path / "solution.nc").exists()
+
+
+# --------------------------------------------------------------------------------------------- signals
+def _slow_problem(tmp_path: Path) -> Path:
+    data = small_problem()
+    data["solver"]["collocation"]["intervals"] = 400
+    return KINDS["solve"].write(tmp_path, data)
+
+
+def _slow_sweep(tmp_path: Path) -> Path:
+    base = small_problem()
+    base["solver"]["collocation"]["intervals"] = 150
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump(base))
+    spec = {"base": "base.yaml", "vary": {"cost.alpha": [0.001 * (i + 1) for i in range(12)]}}
+    path = tmp_path / "input.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    return path
+
+
+def _interrupt(command: str, args: list[str], tmp_path: Path, sig: int, after: Path | float) -> Outcome:
+    """Start, wait until ``after`` exists (or seconds), send ``sig`` (SIGINT to the group, like Ctrl-C)."""
+    process = start(args, tmp_path)
+    deadline = time.monotonic() + (120 if isinstance(after, Path) else after)
+    while time.monotonic() < deadline and not (isinstance(after, Path) and after.exists()):
+        time.sleep(0.05)
+    if sig == signal.SIGINT:
+        os.killpg(process.pid, sig)
+    else:
+        os.kill(process.pid, sig)
+    code, out, err, seconds = finish(process, 60)
+    return Outcome(command, code, out, err, seconds)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_solve_interrupted(tmp_path, sig):
+    path = _slow_problem(tmp_path)
+    out = tmp_path / "out"
+    outcome = _interrupt("solve", KINDS["solve"].command(path, out), tmp_path, sig, out / ".mobisense.lock")
+    outcome = classify(outcome, 130, ("interrupted",), tmp_path, None)
+    RECORD["solve"][outcome.verdict] += 1
+    assert outcome.verdict in GOOD, outcome.problems
+    assert len(outcome.lines) == 1, outcome.stderr
+
+
+def test_solve_killed_then_rerun(tmp_path):
+    path = _slow_problem(tmp_path)
+    out = tmp_path / "out"
+    killed = _interrupt("solve", KINDS["solve"].command(path, out), tmp_path, signal.SIGKILL, out / ".mobisense.lock")
+    assert killed.code == -signal.SIGKILL
+    outcome = attack("solve", KINDS["solve"].command(path, out), tmp_path, 0, (), out, limit=180)
+    assert outcome.verdict in GOOD, outcome.problems
+    assert (out / "solution.nc").exists() and temporaries(tmp_path) == []
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_sweep_interrupted_keeps_finished_rows(tmp_path, sig):
+    import pandas as pd
+
+    path = _slow_sweep(tmp_path)
+    out = tmp_path / "out"
+    args = ["sweep", str(path), "--out", str(out), "--workers", "2", "--quiet"]
+    first_task = out / "tasks"
+    outcome = _interrupt("sweep", args, tmp_path, sig, first_task)
+    outcome = classify(outcome, 130, ("interrupted",), tmp_path, None)
+    RECORD["sweep"][outcome.verdict] += 1
+    assert outcome.verdict in GOOD, outcome.problems
+    assert len(outcome.lines) == 1, outcome.stderr  # no worker tracebacks
+    solved = list(first_task.glob("*/solution.nc"))
+    rows = pd.read_parquet(out / "results.parquet") if (out / "results.parquet").exists() else pd.DataFrame()
+    assert len(rows) >= len(solved) >= 1  # every finished task's row was flushed
+    resumed = attack("sweep", args, tmp_path, 0, (), out, limit=300)
+    assert resumed.verdict in GOOD, resumed.problems
+    table = pd.read_parquet(out / "results.parquet")
+    assert len(table) == 12 and set(table["status"]) == {"solved"}
+
+
+def test_sweep_killed_then_rerun(tmp_path):
+    import pandas as pd
+
+    path = _slow_sweep(tmp_path)
+    out = tmp_path / "out"
+    args = ["sweep", str(path), "--out", str(out), "--workers", "2", "--quiet"]
+    killed = _interrupt("sweep", args, tmp_path, signal.SIGKILL, out / "tasks")
+    assert killed.code == -signal.SIGKILL
+    time.sleep(2)  # the orphaned workers notice their nanny is gone
+    outcome = attack("sweep", args, tmp_path, 0, (), out, limit=300)
+    assert outcome.verdict in GOOD, outcome.problems
+    table = pd.read_parquet(out / "results.parquet")
+    assert len(table) == 12 and table["task"].is_unique and temporaries(tmp_path) == []

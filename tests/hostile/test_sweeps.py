@@ -1,0 +1,164 @@
+"""Hostile sweeps: huge grids, foreign or corrupt result folders, bad cluster options, any YAML value varied."""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+
+import pandas as pd
+import pytest
+import yaml
+from hostile.harness import GOOD, attack
+from hostile.inputs import small_problem
+
+pytestmark = pytest.mark.slow  # each case starts a Python process (~1 s); some solve for seconds
+
+
+def _write(tmp_path, vary, mode="grid", base=None):
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump(base or small_problem()))
+    path = tmp_path / "input.yaml"
+    path.write_text(yaml.safe_dump({"base": "base.yaml", "mode": mode, "vary": vary}))
+    return path
+
+
+def _args(path, out, *extra):
+    return ["sweep", str(path), "--out", str(out), "--quiet", *map(str, extra)]
+
+
+REFUSED = {
+    "a 10^6-task grid": ({"cost.alpha": [0.001 * (i + 1) for i in range(1000)],
+                          "horizon.tf": [5.0 + i for i in range(1000)]}, "grid", (), ("1e+06 tasks", "100000")),
+    "zip of unequal lengths": ({"cost.alpha": [0.1, 0.2], "horizon.tf": [5.0]}, "zip", (), ("equal length",)),
+    "a key that is not in the problem": ({"cost.alhpa": [0.1]}, "grid", (), ("cost.alhpa", "did you mean 'alpha'")),
+    "a malformed key path": ({"cost..alpha": [0.1]}, "grid", (), ("cost..alpha",)),
+    "an empty list of values": ({"cost.alpha": []}, "grid", (), ("at least one value",)),
+    "an invalid value in one task": ({"cost.alpha": [0.1, -1.0]}, "grid", (), ("task 1", "cost.alpha")),
+    "a string for a number": ({"cost.alpha": ["0.1"]}, "grid", (), ("cost.alpha", "remove the quotes")),
+    "an unknown scheme": ({"solver.collocation.scheme": ["radau", "gauss"]}, "grid", (),
+                          ("task 1", "solver.collocation.scheme")),
+    "--workers 0": ({"cost.alpha": [0.1]}, "grid", ("--workers", "0"), ("--workers",)),
+    "--workers -1": ({"cost.alpha": [0.1]}, "grid", ("--workers", "-1"), ("--workers",)),
+    "--time-limit -1": ({"cost.alpha": [0.1]}, "grid", ("--time-limit", "-1"), ("--time-limit",)),
+    "--scheduler refused": ({"cost.alpha": [0.1]}, "grid", ("--scheduler", "tcp://127.0.0.1:1"), ("cannot connect",)),
+    "--scheduler of an unknown protocol": ({"cost.alpha": [0.1]}, "grid", ("--scheduler", "gopher://x:1"),
+                                           ("unknown protocol",)),
+    "--tls-cert without --scheduler": ({"cost.alpha": [0.1]}, "grid", ("--tls-cert", "input.yaml"),
+                                       ("only used with --scheduler",)),
+    "--workers with --scheduler": ({"cost.alpha": [0.1]}, "grid", ("--workers", "2", "--scheduler",
+                                                                    "tcp://127.0.0.1:1"), ("--workers",)),
+    "--max-memory 1M": ({"cost.alpha": [0.1]}, "grid", ("--max-memory", "1M"), ("too large",)),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("name", list(REFUSED))
+def test_refused_sweep(tmp_path, name):
+    vary, mode, extra, words = REFUSED[name]
+    path = _write(tmp_path, vary, mode)
+    out = tmp_path / "out"
+    outcome = attack("sweep", _args(path, out, *extra), tmp_path, 2, words, out, limit=60)
+    assert outcome.verdict in GOOD, outcome.problems
+
+
+def test_scheduler_that_accepts_and_never_answers(tmp_path):
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen(8)
+    accepted = []
+    stop = threading.Event()
+
+    def accept():
+        listener.settimeout(0.5)
+        while not stop.is_set():
+            try:
+                accepted.append(listener.accept()[0])
+            except OSError:
+                pass
+
+    thread = threading.Thread(target=accept, daemon=True)
+    thread.start()
+    try:
+        path = _write(tmp_path, {"cost.alpha": [0.1]})
+        address = f"tcp://127.0.0.1:{listener.getsockname()[1]}"
+        out = tmp_path / "out"
+        outcome = attack("sweep", _args(path, out, "--scheduler", address), tmp_path, 2,
+                         ("cannot connect within 10 s", "no dask handshake"), out, limit=60)  # fmt: skip
+        assert outcome.verdict in GOOD, outcome.problems
+        assert outcome.seconds < 30
+    finally:
+        stop.set()
+        thread.join()
+        listener.close()
+
+
+def test_non_local_scheduler_without_tls_warns(tmp_path):
+    path = _write(tmp_path, {"cost.alpha": [0.1]})
+    out = tmp_path / "out"
+    # a documentation address (RFC 5737) that does not answer: the warning comes first, then exit 2
+    outcome = attack("sweep", _args(path, out, "--scheduler", "tcp://192.0.2.1:8786"), tmp_path, 2,
+                     ("not encrypted", "--tls-ca-file", "cannot connect"), out, limit=60)  # fmt: skip
+    assert outcome.verdict in GOOD, outcome.problems
+
+
+@pytest.fixture()
+def finished_sweep(tmp_path):
+    path = _write(tmp_path, {"cost.alpha": [0.002, 0.004]})
+    out = tmp_path / "result"
+    outcome = attack("sweep", _args(path, out, "--workers", "1"), tmp_path, 0, (), out, limit=300)
+    assert outcome.verdict in GOOD, outcome.problems
+    return path, out
+
+
+def test_another_sweep_into_the_same_folder(tmp_path, finished_sweep):
+    _, out = finished_sweep
+    other = tmp_path / "other"
+    other.mkdir()
+    path = _write(other, {"cost.alpha": [0.003]})
+    before = sorted(p.name for p in out.rglob("*"))
+    outcome = attack("sweep", _args(path, out), other, 2, ("another sweep",), None)
+    assert outcome.verdict in GOOD, outcome.problems
+    assert sorted(p.name for p in out.rglob("*")) == before
+
+
+def test_corrupt_results_on_resume(tmp_path, finished_sweep):
+    path, out = finished_sweep
+    fragment = next((out / "results.parquet").glob("part-*.parquet"))
+    fragment.write_bytes(b"PAR1 this is not parquet")
+    outcome = attack("sweep", _args(path, out), tmp_path, 2, (fragment.name, "not a readable results fragment"), None)
+    assert outcome.verdict in GOOD, outcome.problems
+
+
+def test_corrupt_manifest_on_resume(tmp_path, finished_sweep):
+    path, out = finished_sweep
+    (out / "sweep.json").write_text("{not json")
+    outcome = attack("sweep", _args(path, out), tmp_path, 2, ("sweep.json", "manifest"), None)
+    assert outcome.verdict in GOOD, outcome.problems
+
+
+def test_sweep_into_a_folder_of_another_command(tmp_path):
+    out = tmp_path / "result"
+    out.mkdir()
+    (out / "summary.json").write_text("{}")
+    path = _write(tmp_path, {"cost.alpha": [0.1]})
+    outcome = attack("sweep", _args(path, out), tmp_path, 2, ("not empty", "summary.json"), None)
+    assert outcome.verdict in GOOD, outcome.problems
+
+
+def test_any_yaml_value_can_be_varied(tmp_path):
+    base = small_problem()
+    base["solver"]["collocation"]["intervals"] = 15
+    vary = {
+        "solver.collocation.scheme": ["radau", "legendre"],
+        "sensors[0].noise": [{"model": "quadratic_range", "beta": 5.0, "gamma": 3.0},
+                             {"model": "quadratic_range", "beta": 2.0, "gamma": 1.0}],
+        "sensors[0].name": ["left", "right"],
+    }  # fmt: skip
+    path = _write(tmp_path, vary, base=base)
+    out = tmp_path / "out"
+    outcome = attack("sweep", _args(path, out, "--workers", "2"), tmp_path, 0, (), out, limit=300)
+    assert outcome.verdict in GOOD, outcome.problems
+    table = pd.read_parquet(out / "results.parquet")
+    assert len(table) == 8 and set(table["status"]) == {"solved"}
+    assert set(table["solver.collocation.scheme"]) == {"radau", "legendre"}
+    assert {json.loads(v)["beta"] for v in table["sensors[0].noise"]} == {5.0, 2.0}  # mappings stored as JSON
+    assert json.loads((out / "sweep.json").read_text())["tasks"] == 8
