@@ -18,7 +18,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import casadi as ca
 import numpy as np
@@ -27,7 +27,8 @@ from pydantic import Field, model_validator
 
 from ..core.config import InvalidValue, PositiveFloat, StrictModel
 
-__all__ = ["MAX_FIELD_STATES", "SHOOTING_MEMORY_LIMIT", "FieldKernel", "FieldSpec", "FieldProcess",
+__all__ = [
+    "ShootingOptions","MAX_FIELD_STATES", "SHOOTING_MEMORY_LIMIT", "FieldKernel", "FieldSpec", "FieldProcess",
            "shooting_substeps", "shooting_memory_bytes"]
 
 #: The largest grid nx·ny accepted: Kₛ and every Σ are dense n × n (n = 2500: 50 MB per matrix).
@@ -100,8 +101,10 @@ class FieldKernel(StrictModel):
 class FieldSpec(StrictModel):
     """``process.field``: the gridded field whose A, B, Q, Σ0 and state locations are derived."""
 
-    grid: tuple[int, int] = Field(description="[nx, ny] cells; n = nx·ny states at the cell centres")
-    extent: tuple[tuple[float, float], tuple[float, float]] = Field(description="[[x_min, x_max], [y_min, y_max]] (L)")
+    grid: list[int] = Field(min_length=2, max_length=2, description="[nx, ny] cells; n = nx·ny states")
+    extent: list[Annotated[list[float], Field(min_length=2, max_length=2)]] = Field(
+        min_length=2, max_length=2, description="[[x_min, x_max], [y_min, y_max]] (L)"
+    )
     kernel: FieldKernel = Field(description="spatial covariance kernel {type, length_scale, variance}")
     time_constant: PositiveFloat = Field(description="τ (T): A = −I/τ, Q = 2Kₛ/τ")
     jitter: float = Field(1e-8, ge=1e-12, le=1e-4, description="relative nugget, raised ×10 until cond(Kₛ) ≤ 1e8")
@@ -135,6 +138,30 @@ class FieldSpec(StrictModel):
     def process(self) -> FieldProcess:
         """The numeric field (Kₛ, its inverse, the locations), built once per distinct spec."""
         return _build(self.model_dump_json())
+
+
+class ShootingOptions(StrictModel):
+    """Reduced-space shooting for field problems (docs/theory/field.md §3): only the controls are NLP variables.
+
+    The ε-homotopy runs on ``coarse_intervals``, then one ε = 1 solve on ``intervals`` from its controls.
+    """
+
+    intervals: int = Field(100, ge=2, le=10_000, description="K control intervals of the final solve")
+    coarse_intervals: int = Field(25, ge=2, le=10_000, description="intervals of the ε-homotopy")
+    substeps: int | None = Field(None, ge=1, le=1000, description="RK4 steps per interval (default: h·λ ≤ 0.25)")
+    memory: int = Field(30, ge=2, le=500, description="L-BFGS history length")
+    homotopy: list[float] = Field([0.03, 0.1, 0.2, 0.4, 0.7, 1.0], min_length=1, description="coarse ε schedule")
+    homotopy_tolerance: float = Field(1e-5, gt=0.0, lt=1.0, description="Ipopt tol of the coarse steps")
+    coarse_max_iterations: int = Field(300, ge=1, description="Ipopt iterations per coarse step")
+    full_sigma: bool | None = Field(None, description="write the full Σ(t) to solution.nc (default: n <= 25)")
+
+    @model_validator(mode="after")
+    def _schedule(self) -> ShootingOptions:
+        eps = self.homotopy
+        increasing = all(b > a for a, b in zip(eps, eps[1:], strict=False))
+        if any(not 0 < e <= 1 for e in eps) or not increasing or eps[-1] != 1.0:
+            raise InvalidValue("homotopy", f"expected increasing ε in (0, 1] ending at 1, got {eps}")
+        return self
 
 
 @functools.lru_cache(maxsize=8)

@@ -45,12 +45,11 @@ from ..core.config import (
     parse_config,
 )
 from ..core.units import LengthUnit, PhysicalUnit, TimeUnit, UnitSystem
-from .field import SHOOTING_MEMORY_LIMIT, FieldSpec, shooting_memory_bytes, shooting_substeps
+from .field import SHOOTING_MEMORY_LIMIT, FieldSpec, ShootingOptions, shooting_memory_bytes, shooting_substeps
 from .noise_models import NoiseModel, parse_noise
 from .registries import BVPSolverName, HomotopyModeName, MethodName, SchemeName
 
-#: A field problem with more states than this is refused by the methods that carry Σ as variables.
-MAX_DIRECT_FIELD_STATES = 9
+MAX_DIRECT_FIELD_STATES = 9  #: a larger field is refused by the methods that carry Σ as variables
 
 __all__ = [
     "Units",
@@ -269,30 +268,6 @@ class BVPOptions(StrictModel):
     )
 
 
-class ShootingOptions(StrictModel):
-    """Reduced-space shooting for field problems (docs/theory/field.md §3): only the controls are NLP variables.
-
-    The ε-homotopy runs on ``coarse_intervals``, then one ε = 1 solve on ``intervals`` from its controls.
-    """
-
-    intervals: int = Field(100, ge=2, le=10_000, description="K control intervals of the final solve")
-    coarse_intervals: int = Field(25, ge=2, le=10_000, description="intervals of the ε-homotopy")
-    substeps: int | None = Field(None, ge=1, le=1000, description="RK4 steps per interval (default: h·λ ≤ 0.25)")
-    memory: int = Field(30, ge=2, le=500, description="L-BFGS history length")
-    homotopy: list[float] = Field([0.03, 0.1, 0.2, 0.4, 0.7, 1.0], min_length=1, description="coarse ε schedule")
-    homotopy_tolerance: float = Field(1e-5, gt=0.0, lt=1.0, description="Ipopt tol of the coarse steps")
-    coarse_max_iterations: int = Field(300, ge=1, description="Ipopt iterations per coarse step")
-    full_sigma: bool | None = Field(None, description="write the full Σ(t) to solution.nc (default: n <= 25)")
-
-    @model_validator(mode="after")
-    def _schedule(self) -> ShootingOptions:
-        eps = self.homotopy
-        increasing = all(b > a for a, b in zip(eps, eps[1:], strict=False))
-        if any(not 0 < e <= 1 for e in eps) or not increasing or eps[-1] != 1.0:
-            raise InvalidValue("homotopy", f"expected increasing ε in (0, 1] ending at 1, got {eps}")
-        return self
-
-
 class SolverOptions(StrictModel):
     """How to solve: method, transcription, homotopy and Ipopt tolerances."""
 
@@ -386,18 +361,14 @@ class Problem(StrictModel):
 
     def _check_shooting_size(self) -> None:
         """Refuse, before anything of size n² is allocated, a shooting NLP larger than the memory limit."""
-        o, n = self.solver.shooting, self.n
-        noise = [s.noise.parameters()[0] for s in self.sensors if s.noise.model == "constant"]
-        if len(noise) != self.N:
-            return  # refused per sensor below
-        m = o.substeps or shooting_substeps(self.process.field, noise, self.horizon.tf - self.horizon.t0, o.intervals)
-        need = shooting_memory_bytes(n, o.intervals, m)
-        if need > SHOOTING_MEMORY_LIMIT:
-            raise InvalidValue(
-                "solver.shooting.intervals",
-                f"n = {n} states on K = {o.intervals} intervals (m = {m} substeps) need about {need / 1024**3:.1f} GB, "
-                f"more than {SHOOTING_MEMORY_LIMIT / 1024**3:.0f} GB; use a coarser grid or fewer intervals",
-            )
+        o, n, T = self.solver.shooting, self.n, self.horizon.tf - self.horizon.t0
+        if all(s.noise.model == "constant" for s in self.sensors):  # else refused per sensor below
+            m = o.substeps or shooting_substeps(self.process.field, [s.noise.parameters()[0] for s in self.sensors],
+                                                T, o.intervals)  # fmt: skip
+            if (need := shooting_memory_bytes(n, o.intervals, m) / 2**30) > (limit := SHOOTING_MEMORY_LIMIT / 2**30):
+                raise InvalidValue("solver.shooting.intervals", f"n = {n} states on K = {o.intervals} intervals "
+                                   f"(m = {m} substeps) need about {need:.1f} GB, more than {limit:.0f} GB; "
+                                   "use a coarser grid or fewer intervals")  # fmt: skip
 
     def _check_point_sensor(self, i: int, sensor: Sensor) -> None:
         if self.process.field is None:

@@ -19,7 +19,7 @@ from mobisense.ocp.shooting import FieldShooting
 
 
 def _spec(grid=(3, 3), kernel="matern32", length=3.0):
-    return FieldSpec(grid=grid, extent=((0, 10), (0, 10)), time_constant=20.0,
+    return FieldSpec(grid=list(grid), extent=[[0.0, 10.0], [0.0, 10.0]], time_constant=20.0,
                      kernel={"type": kernel, "length_scale": length, "variance": 1.0})  # fmt: skip
 
 
