@@ -99,7 +99,9 @@ def replay_kind(data: Any, source: Path) -> str:
     if data is None:
         raise ConfigError(f"{source}: (top level): the file is empty; expected a mapping of keys")
     if not isinstance(data, dict):
-        raise ConfigError(f"{source}: (top level): expected a mapping of keys (a field replay, a plan replay or a re-planning file)")
+        raise ConfigError(
+            f"{source}: (top level): expected a mapping of keys (a field replay, a plan replay or a re-planning file)"
+        )
     kind = data.get("kind")
     kind = kind if isinstance(kind, str) else None  # a list or mapping is reported by the model
     if kind in ("field_replay", "plan_replay", "replan"):

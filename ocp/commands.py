@@ -166,11 +166,15 @@ def check_problem(data: dict[str, Any], path: Path, kind: str = "problem") -> st
 
     problem = Problem.from_dict(data, source=str(path))
     c, u = problem.solver.collocation, problem.units
+    grid = f"{c.scheme}, degree {c.degree}, {c.intervals} intervals"
+    if problem.solver.method == "shooting":
+        s, (nx, ny) = problem.solver.shooting, problem.process.field.grid
+        grid = f"{nx}×{ny} field, {s.intervals} intervals after a {s.coarse_intervals}-interval homotopy"
     return (
         f"optimal-control problem {problem.name!r}: {_count(problem.n, 'process state')}, "
         f"{_count(problem.N, 'sensor')}, "
         f"t in [{problem.horizon.t0:g}, {problem.horizon.tf:g}] {u.time}, {problem.solver.method} method "
-        f"({c.scheme}, degree {c.degree}, {c.intervals} intervals), problem hash {problem.digest()}"
+        f"({grid}), problem hash {problem.digest()}"
     )
 
 

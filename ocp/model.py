@@ -36,6 +36,10 @@ class Structure:
     bounded_control: tuple[bool, ...]
     #: path constraints (:func:`~mobisense.ocp.path_constraints.path_structure`)
     path: tuple[tuple[Any, ...], ...] = ()
+    #: per sensor: measures the field at its position (kriging row, docs/theory/field.md §2)
+    point: tuple[bool, ...] = ()
+    #: the field block (JSON) when any sensor is a point sensor: its kernel is part of the graph
+    field: str | None = None
 
     @classmethod
     def of(cls, problem: Problem) -> Structure:
@@ -49,7 +53,18 @@ class Structure:
             fixed_velocity=tuple(s.terminal is not None and s.terminal.v is not None for s in sensors),
             bounded_control=tuple(s.u_max is not None for s in sensors),
             path=path_structure(problem.constraints, problem.N),
+            point=tuple(problem.is_point(i) for i in range(problem.N)),
+            field=problem.process.field.model_dump_json()
+            if any(problem.is_point(i) for i in range(problem.N))
+            else None,
         )
+
+    @property
+    def field_process(self) -> Any:
+        """The :class:`~mobisense.ocp.field.FieldProcess` of the point sensors (None without)."""
+        from .field import FieldSpec
+
+        return None if self.field is None else FieldSpec.model_validate_json(self.field).process()
 
     @property
     def N(self) -> int:  # noqa: N802
@@ -99,6 +114,8 @@ class ParameterLayout:
             ("control_scale", (1,)),
             ("cost_scale", (1,)),
         ]
+        if s.field is not None:
+            blocks += [("Ks_inv", (n, n)), ("field_loc", (n, 2))]
         for i in range(s.N):
             model = NOISE_MODELS[s.noise_models[i]]
             blocks += [
@@ -167,6 +184,9 @@ class ParameterLayout:
             "control_scale": scales["control"],
             "cost_scale": 1.0,
         }
+        if problem.process.field is not None and any(problem.is_point(i) for i in range(problem.N)):
+            process = problem.process.field.process()
+            values["Ks_inv"], values["field_loc"] = process.Ks_inv, process.locations
         for i, sensor in enumerate(problem.sensors):
             values[f"p0_{i}"] = sensor.p0
             values[f"v0_{i}"] = sensor.v0
@@ -212,9 +232,7 @@ class SensorKalmanModel:
             "running", [x, u, P], [ca.vertcat(energy + ca.trace(b["K"] @ Sigma), energy)], ["x", "u", "P"], ["L"]
         )
         self.terminal = ca.Function("terminal", [x, P], [ca.trace(b["M"] @ Sigma)], ["x", "P"], ["Phi"])
-        x0 = s.state.join_symbolic(
-            b["Sigma0"], [b[f"p0_{i}"] for i in range(N)], [b[f"v0_{i}"] for i in range(N)]
-        )
+        x0 = s.state.join_symbolic(b["Sigma0"], [b[f"p0_{i}"] for i in range(N)], [b[f"v0_{i}"] for i in range(N)])
         self.x0 = ca.Function("x0", [P], [x0], ["P"], ["x0"])
         x_scale = s.state.join_symbolic(
             b["sigma_scale"], ca.repmat(b["length_scale"], 2 * N, 1), ca.repmat(b["velocity_scale"], 2 * N, 1)
@@ -234,11 +252,20 @@ class SensorKalmanModel:
         self.path_scale = ca.Function("path_scale", [P], [ca.vertcat(*units) if units else ca.SX(0, 1)])
 
     def _information(self, positions: list[Any], b: dict[str, Any]) -> Any:
-        """S(p) = Σ_i C_i' diag(1/r_i(p_i)) C_i  (docs/theory/ocp.md, eq. ocp.3, with R block-diagonal)."""
+        """S(p) = Σ_i C_i' diag(1/r_i(p_i)) C_i  (docs/theory/ocp.md, eq. ocp.3, with R block-diagonal).
+
+        A point sensor contributes c(p_i) c(p_i)' / r_i with the kriging row c(p) = Kₛ⁻¹ k(p)
+        (docs/theory/field.md, eq. field.4).
+        """
         s = self.structure
         S = ca.SX.zeros(s.n, s.n)
+        field = s.field_process
         for i in range(s.N):
             model = NOISE_MODELS[s.noise_models[i]]
+            if s.point and s.point[i]:
+                c = field.symbolic_weights(positions[i], b["Ks_inv"], b["field_loc"])
+                S += c @ c.T / model.variance(positions[i], positions[i], b[f"theta_{i}"])
+                continue
             C = b[f"C_{i}"]
             for k in range(s.rows[i]):
                 r = model.variance(positions[i], b[f"rowloc_{i}"][k, :].T, b[f"theta_{i}"])

@@ -54,7 +54,7 @@ def plot_paths(solution: Solution):  # noqa: ANN201  (matplotlib Figure)
 
     problem = solution.problem
     length = _label(solution, length=1)
-    locs = np.asarray(problem.process.locations)
+    locs = problem.matrices()["locations"]
     pts = np.concatenate([solution.p.reshape(-1, 2), locs])
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     pad = 0.15 * max(float((hi - lo).max()), 1.0)
@@ -214,10 +214,19 @@ FIGURES = {
 
 
 def save_figures(solution: Solution, folder: str | Path) -> list[Path]:
-    """Write paths.png, covariance.png, controls.png, homotopy.png (and continuation.png) into ``folder``."""
+    """Write paths.png, covariance.png, controls.png, homotopy.png (and continuation.png) into ``folder``.
+
+    For a field problem: variance_maps.png and trace.png (:mod:`mobisense.ocp.field_plots`), controls.png,
+    homotopy.png.
+    """
     folder = Path(folder)
     written = []
-    for name, draw in FIGURES.items():
+    figures = FIGURES
+    if solution.problem.process.field is not None:  # maps of diag Σ instead of Σ's n² entries
+        from .field_plots import FIELD_FIGURES
+
+        figures = {**FIELD_FIGURES, "controls.png": plot_controls, "homotopy.png": plot_homotopy}
+    for name, draw in figures.items():
         figure = draw(solution)
         if figure is not None:
             write_figure(folder / name, lambda figure=figure: figure)  # saves and closes it

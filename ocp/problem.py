@@ -45,9 +45,12 @@ from ..core.config import (
     parse_config,
 )
 from ..core.units import LengthUnit, PhysicalUnit, TimeUnit, UnitSystem
+from .field import SHOOTING_MEMORY_LIMIT, FieldSpec, ShootingOptions, shooting_memory_bytes, shooting_substeps
 from .noise_models import NoiseModel, parse_noise
 from .path_constraints import PathConstraints, check_initial_state
 from .registries import BVPSolverName, HomotopyModeName, MethodName, SchemeName, StrategyName
+
+MAX_DIRECT_FIELD_STATES = 9  #: a larger field is refused by the methods that carry Σ as variables
 
 __all__ = [
     "Units",
@@ -59,6 +62,7 @@ __all__ = [
     "CollocationOptions",
     "HomotopyOptions",
     "BVPOptions",
+    "ShootingOptions",
     "SolverOptions",
     "Problem",
     "load_problem",
@@ -110,16 +114,29 @@ class Horizon(StrictModel):
 
 
 class Process(StrictModel):
-    """The process ``x' = A x + B w``, ``E[w w'] = Q``, its initial error covariance and locations."""
+    """The process ``x' = A x + B w``, ``E[w w'] = Q``, its initial error covariance and locations.
 
-    A: Matrix = Field(description="n×n state matrix of x' = A x + B w (1/T)")
-    B: Matrix = Field(description="n×m noise input matrix")
-    Q: Matrix = Field(description="m×m intensity of the white process noise w (symmetric, PSD)")
-    Sigma0: Matrix = Field(description="n×n initial error covariance (symmetric positive definite)")
-    locations: list[Vector2] = Field(description="one planar location per state (L)")
+    Either the explicit matrices or ``field`` (a gridded random field, :class:`~mobisense.ocp.field.FieldSpec`,
+    from which A, B, Q, Σ0 and the locations are derived: docs/theory/field.md §1).
+    """
+
+    A: Matrix | None = Field(None, description="n×n state matrix of x' = A x + B w (1/T)")
+    B: Matrix | None = Field(None, description="n×m noise input matrix")
+    Q: Matrix | None = Field(None, description="m×m intensity of the white process noise w (symmetric, PSD)")
+    Sigma0: Matrix | None = Field(None, description="n×n initial error covariance (symmetric positive definite)")
+    locations: list[Vector2] | None = Field(None, description="one planar location per state (L)")
+    field: FieldSpec | None = Field(None, description="a gridded random field instead of the matrices")
 
     @model_validator(mode="after")
     def _shapes(self) -> Process:
+        explicit = [k for k in ("A", "B", "Q", "Sigma0", "locations") if getattr(self, k) is not None]
+        if self.field is not None:
+            if explicit:
+                raise InvalidValue(explicit[0], "expected no explicit matrices with process.field (they are derived)")
+            return self
+        for key in ("A", "B", "Q", "Sigma0", "locations"):
+            if getattr(self, key) is None:
+                raise InvalidValue(key, "expected the matrices A, B, Q, Sigma0, locations, or a field block")
         A = check_square("A", self.A)
         n = A.shape[0]
         m = np.asarray(self.B).shape[1]
@@ -133,7 +150,13 @@ class Process(StrictModel):
     @property
     def n_states(self) -> int:
         """Number of process states n."""
-        return len(self.A)
+        return self.field.n if self.field is not None else len(self.A)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """A (n,n), B (n,m), Q (m,m), Sigma0 (n,n), locations (n,2) as float arrays (derived for a field)."""
+        if self.field is not None:
+            return self.field.process().matrices()
+        return {k: np.asarray(getattr(self, k), float) for k in ("A", "B", "Q", "Sigma0", "locations")}
 
 
 class Terminal(StrictModel):
@@ -152,17 +175,39 @@ class Sensor(StrictModel):
     noise: Annotated[SerializeAsAny[NoiseModel], BeforeValidator(parse_noise)] = Field(
         description="measurement-noise model {model: NAME, parameters…}: variance as a function of position"
     )
-    measures: Matrix | None = Field(default=None, description="rows of C_i (default: every state)")
+    measures: Matrix | Literal["point"] | None = Field(
+        default=None,
+        description="rows of C_i (default: every state), or 'point': the field value at the sensor's position "
+        "(kriging row c(p), needs process.field; docs/theory/field.md §2)",
+    )
     terminal: Terminal | None = Field(None, description="fixed terminal position and/or velocity (default: free)")
     u_max: PositiveFloat | None = Field(default=None, description="bound on |u_i| (L/T^2)")
 
 
-class Cost(StrictModel):
-    """Cost weights: ``J = Tr[M Σ(tf)] + ∫ (alpha/2 |u|^2 + Tr[K Σ]) dt``."""
+#: named weight matrices: ``mean`` = I/n (the mean error variance), ``sum`` = I (the trace), ``zero``
+WeightName = Literal["mean", "sum", "zero"]
 
-    M: Matrix = Field(description="n×n terminal weight of Tr[M Σ(tf)] (symmetric positive definite)")
-    K: Matrix | None = Field(None, description="n×n running weight of ∫ Tr[K Σ] dt (symmetric PSD; default 0)")
+
+class Cost(StrictModel):
+    """Cost weights: ``J = Tr[M Σ(tf)] + ∫ (alpha/2 |u|^2 + Tr[K Σ]) dt``.
+
+    M and K are matrices or names: ``mean`` (I/n), ``sum`` (I), ``zero`` (K only).
+    """
+
+    M: Matrix | WeightName = Field(description="n×n terminal weight (SPD), or 'mean' (I/n) / 'sum' (I)")
+    K: Matrix | WeightName | None = Field(None, description="n×n running weight (PSD; default 0), or a name")
     alpha: PositiveFloat = Field(description="control weight α of ∫ α/2 |u|² dt")
+
+    def weight(self, key: str, n: int) -> np.ndarray:
+        """Weight ``key`` ("M" or "K") as an (n, n) array."""
+        value = getattr(self, key)
+        if value is None or value == "zero":
+            return np.zeros((n, n))
+        if value == "mean":
+            return np.eye(n) / n
+        if value == "sum":
+            return np.eye(n)
+        return np.asarray(value, float)
 
 
 class CollocationOptions(StrictModel):
@@ -232,7 +277,9 @@ class BVPOptions(StrictModel):
 class SolverOptions(StrictModel):
     """How to solve: method, transcription, homotopy and Ipopt tolerances."""
 
-    method: MethodName = Field("direct", description="direct collocation, indirect (PMP) or both")
+    method: MethodName = Field(
+        "direct", description="direct collocation, indirect (PMP), both, or shooting (default for a field)"
+    )
     strategy: StrategyName = Field(
         "auto", description="direct method: which starts to solve and which optimum to keep (direct.md §5.6)"
     )
@@ -244,6 +291,7 @@ class SolverOptions(StrictModel):
         "auto", description="compile the collocation kernels with the C compiler (cached on disk)"
     )
     collocation: CollocationOptions = CollocationOptions()
+    shooting: ShootingOptions = ShootingOptions()
     homotopy: HomotopyOptions = HomotopyOptions()
     bvp: BVPOptions = BVPOptions()
     tolerance: float = Field(1e-9, gt=0.0, lt=1e-2, description="Ipopt tol (scaled NLP error)")
@@ -273,6 +321,19 @@ class Problem(StrictModel):
     @model_validator(mode="after")
     def _cross_checks(self) -> Problem:
         n = self.process.n_states
+        field = self.process.field
+        if field is not None and "method" not in self.solver.model_fields_set:
+            self.solver.method = "shooting"  # docs/theory/field.md §3.4: the scalable method for a field
+        method = self.solver.method
+        if method == "shooting" and field is None:
+            raise InvalidValue("solver.method", "expected process.field with method 'shooting' (the O(n²N) "
+                               "propagation needs the field structure A = −I/τ, Q ∝ Kₛ)")  # fmt: skip
+        for key in ("M", "K"):
+            if isinstance(getattr(self.cost, key), list):
+                check = check_spd if key == "M" else check_psd
+                check(f"cost.{key}", check_shape(f"cost.{key}", getattr(self.cost, key), (n, n)))
+        if self.cost.M == "zero":
+            raise InvalidValue("cost.M", "expected a positive definite terminal weight, not 'zero'")
         scales = self.reference_scales()
         for name, key, unit in (("length", "sensors", "L"), ("velocity", "horizon", "L/T"),
                                 ("control", "horizon", "L/T²")):  # fmt: skip
@@ -283,9 +344,6 @@ class Problem(StrictModel):
                     f"{MAX_MAGNITUDE:g}] (distances {scales['length']:g} L over tf − t0 = {scales['horizon']:g} T); "
                     "change the length or time units",
                 )
-        check_spd("cost.M", check_shape("cost.M", self.cost.M, (n, n)))
-        if self.cost.K is not None:
-            check_psd("cost.K", check_shape("cost.K", self.cost.K, (n, n)))
         names = [s.name for s in self.sensors]
         if self.constraints is not None:
             if self.solver.method != "direct":
@@ -298,14 +356,16 @@ class Problem(StrictModel):
         for i, sensor in enumerate(self.sensors):
             if names.index(sensor.name) != i:
                 raise InvalidValue(f"sensors[{i}].name", f"duplicate sensor name {sensor.name!r}")
-            if sensor.u_max is not None and self.solver.method != "direct":
+            if sensor.u_max is not None and method in ("indirect", "both"):
                 raise InvalidValue(
                     f"sensors[{i}].u_max",
-                    f"expected no control bound with solver.method {self.solver.method!r} (got {sensor.u_max:g}): "
+                    f"expected no control bound with solver.method {method!r} (got {sensor.u_max:g}): "
                     "the indirect method's control law would be a non-smooth saturation; "
                     "remove u_max or use method 'direct'",
                 )
-            if sensor.measures is not None:
+            if sensor.measures == "point":
+                self._check_point_sensor(i, sensor)
+            elif sensor.measures is not None:
                 rows = np.asarray(sensor.measures, dtype=float)
                 if rows.shape[1] != n:
                     raise InvalidValue(
@@ -313,7 +373,40 @@ class Problem(StrictModel):
                     )
                 if np.any(np.all(rows == 0.0, axis=1)):
                     raise InvalidValue(f"sensors[{i}].measures", "expected no all-zero row")
+            elif method == "shooting":
+                raise InvalidValue(f"sensors[{i}].measures", "expected 'point' with method 'shooting'")
+        if method == "shooting":
+            self._check_shooting_size()
+        if field is not None and method in ("direct", "indirect", "both") and n > MAX_DIRECT_FIELD_STATES:
+            raise InvalidValue(
+                "solver.method",
+                f"expected method 'shooting' for a field of n = {n} > {MAX_DIRECT_FIELD_STATES} states: "
+                f"'{method}' carries the n(n+1)/2 = {n * (n + 1) // 2} entries of Σ as variables "
+                "(measured > 10 GB at n = 9; docs/theory/field.md §3.4)",
+            )
         return self
+
+    def _check_shooting_size(self) -> None:
+        """Refuse, before anything of size n² is allocated, a shooting NLP larger than the memory limit."""
+        o, n, T = self.solver.shooting, self.n, self.horizon.tf - self.horizon.t0
+        if all(s.noise.model == "constant" for s in self.sensors):  # else refused per sensor below
+            m = o.substeps or shooting_substeps(self.process.field, [s.noise.parameters()[0] for s in self.sensors],
+                                                T, o.intervals)  # fmt: skip
+            if (need := shooting_memory_bytes(n, o.intervals, m) / 2**30) > (limit := SHOOTING_MEMORY_LIMIT / 2**30):
+                raise InvalidValue("solver.shooting.intervals", f"n = {n} states on K = {o.intervals} intervals "
+                                   f"(m = {m} substeps) need about {need:.1f} GB, more than {limit:.0f} GB; "
+                                   "use a coarser grid or fewer intervals")  # fmt: skip
+
+    def _check_point_sensor(self, i: int, sensor: Sensor) -> None:
+        if self.process.field is None:
+            raise InvalidValue(f"sensors[{i}].measures", "expected process.field with 'point' (the kriging rows "
+                               "interpolate the field between its states)")  # fmt: skip
+        if sensor.noise.model != "constant":
+            raise InvalidValue(f"sensors[{i}].noise.model", "expected 'constant' with measures: point (the noise of "
+                               "a range-dependent model would be evaluated at distance 0)")  # fmt: skip
+        if self.solver.method in ("indirect", "both"):
+            raise InvalidValue("solver.method", "expected 'direct' or 'shooting' with point sensors (the indirect "
+                               "method has no kriging rows yet)")  # fmt: skip
 
     # ------------------------------------------------------------------ numeric accessors
     def reference_scales(self) -> dict[str, float]:
@@ -323,7 +416,8 @@ class Problem(StrictModel):
         length / horizon and the initial speeds, ``control`` = velocity / horizon.
         """
         horizon = self.horizon.tf - self.horizon.t0
-        locations = np.asarray(self.process.locations, float)
+        field = self.process.field
+        locations = field.locations() if field is not None else np.asarray(self.process.locations, float)
         starts = np.asarray([s.p0 for s in self.sensors], float)
         distances = np.linalg.norm(starts[:, None, :] - locations[None, :, :], axis=-1)
         length = max(1.0, float(distances.max()))
@@ -342,21 +436,28 @@ class Problem(StrictModel):
 
     def matrices(self) -> dict[str, np.ndarray]:
         """Numeric problem data: A (n,n), BQB' (n,n), Sigma0 (n,n), M (n,n), K (n,n), locations (n,2)."""
-        A = np.asarray(self.process.A, float)
-        B = np.asarray(self.process.B, float)
-        Q = np.asarray(self.process.Q, float)
-        K = np.zeros((self.n, self.n)) if self.cost.K is None else np.asarray(self.cost.K, float)
+        a = self.process.arrays()
         return {
-            "A": A,
-            "BQB": B @ Q @ B.T,
-            "Sigma0": np.asarray(self.process.Sigma0, float),
-            "M": np.asarray(self.cost.M, float),
-            "K": K,
-            "locations": np.asarray(self.process.locations, float),
+            "A": a["A"],
+            "BQB": a["B"] @ a["Q"] @ a["B"].T,
+            "Sigma0": a["Sigma0"],
+            "M": self.cost.weight("M", self.n),
+            "K": self.cost.weight("K", self.n),
+            "locations": a["locations"],
         }
 
+    def is_point(self, i: int) -> bool:
+        """Whether sensor ``i`` measures the field at its own position (``measures: point``)."""
+        return self.sensors[i].measures == "point"
+
     def measurement_rows(self, i: int) -> np.ndarray:
-        """Rows of C_i for sensor ``i``, shape (m_i, n); default the identity (every state)."""
+        """Rows of C_i for sensor ``i``, shape (m_i, n); default the identity (every state).
+
+        A point sensor's row is the kriging row c(p0)' at its initial position (eq. field.3); the models
+        evaluate c(p) along the path.
+        """
+        if self.is_point(i):
+            return self.process.field.process().weights(np.asarray(self.sensors[i].p0, float)[None, :])
         measures = self.sensors[i].measures
         return np.eye(self.n) if measures is None else np.asarray(measures, float)
 
@@ -366,6 +467,8 @@ class Problem(StrictModel):
         A row c measures the states it weights; its location is the |c|-weighted mean of those states'
         locations (for a unit row e_j this is exactly s_j, the paper's case).
         """
+        if self.is_point(i):
+            return np.asarray(self.sensors[i].p0, float)[None, :]
         rows = np.abs(self.measurement_rows(i))
         return (rows @ self.matrices()["locations"]) / rows.sum(axis=1, keepdims=True)
 

@@ -30,6 +30,7 @@ METHODS: Registry[Any] = Registry(
         "direct": Lazy("mobisense.ocp.direct.solver:solve_direct"),
         "indirect": Lazy("mobisense.ocp.indirect.solver:solve_indirect"),
         "both": Lazy("mobisense.ocp.compare:solve_both"),
+        "shooting": Lazy("mobisense.ocp.field_solve:solve_shooting"),
     },
 )
 

@@ -32,6 +32,8 @@ class SolveReporter:
             return solve(self.problem, method)
         h = self.problem.solver.homotopy
         total = 1 if h.mode == "none" else (len(fixed_schedule(h.step)) if h.mode == "fixed" else None)
+        if method == "shooting":  # the coarse ε steps and the fine ε = 1 solve
+            total = len(self.problem.solver.shooting.homotopy) + 1
         if total is not None and method == "both":
             total *= 2  # the direct, then the indirect continuation
         with Progress(

@@ -81,6 +81,20 @@ def indirect_estimate(problem: Problem) -> Estimate:
     return Estimate(what, symbolic + lu + scipy_bvp, _SMALLER + ", or solver.bvp.max_nodes", direct.seconds)
 
 
+def shooting_estimate(problem: Problem) -> Estimate:
+    """Peak memory of the reduced-space shooting method (:func:`mobisense.ocp.field.shooting_memory_bytes`)."""
+    from .field import shooting_memory_bytes, shooting_substeps
+
+    o, n = problem.solver.shooting, problem.n
+    noise = [s.noise.parameters()[0] for s in problem.sensors]
+    m = o.substeps or shooting_substeps(problem.process.field, noise, problem.horizon.tf - problem.horizon.t0,
+                                        o.intervals)  # fmt: skip
+    solution = 3 * 8.0 * (o.intervals + 1) * n * n  # Σ(t), its copy in the dataset and the baseline
+    what = f"the shooting NLP (n = {n} field states, N = {problem.N} sensors, K = {o.intervals}, m = {m})"
+    return Estimate(what, shooting_memory_bytes(n, o.intervals, m) + solution,
+                    "use a coarser grid or fewer intervals (solver.shooting.intervals)")  # fmt: skip
+
+
 def problem_estimates(
     problem: Problem, method: str | None = None, starts: int = 1, local_workers: int = 0
 ) -> list[Estimate]:
@@ -98,6 +112,8 @@ def problem_estimates(
     """
     method = method or problem.solver.method
     parts = []
+    if method == "shooting":
+        parts.append(shooting_estimate(problem))
     if method in ("direct", "both"):
         parts.append(direct_estimate(problem))
     if method in ("indirect", "both"):

@@ -71,7 +71,8 @@ class HomotopyStep:
 class Solution:
     """A solved (or partially solved) mobile-sensor Kalman problem.
 
-    Arrays: ``t`` (T,) state times; ``Sigma`` (T, n, n); ``p``, ``v`` (T, N, 2); ``t_u`` (Tu,) control times;
+    Arrays: ``t`` (T,) state times; ``Sigma`` (T, n, n) (None if loaded from a file written without it);
+    ``p``, ``v`` (T, N, 2); ``t_u`` (Tu,) control times;
     ``u`` (Tu, N, 2); optional costates on ``t_costate`` (Tc,): ``Lam`` (Tc, n, n), ``lam_p``, ``lam_v``
     (Tc, N, 2) — the PMP costates of J at ε = ``eps`` (Λ is the symmetric matrix costate of Σ).
     """
@@ -82,7 +83,7 @@ class Solution:
     message: str
     eps: float
     t: np.ndarray
-    Sigma: np.ndarray
+    Sigma: np.ndarray | None
     p: np.ndarray
     v: np.ndarray
     t_u: np.ndarray
@@ -213,7 +214,9 @@ class Solution:
 
     @property
     def min_sigma_eigenvalue(self) -> float:
-        """Smallest eigenvalue of Σ(t) over the state grid (must be > 0)."""
+        """Smallest eigenvalue of Σ(t) over the state grid (must be > 0); from ``stats`` when Σ was not kept."""
+        if self.Sigma is None:
+            return float(self.stats["min_sigma_eigenvalue"])
         return float(np.linalg.eigvalsh(self.Sigma).min())
 
     def non_finite(self) -> str | None:

@@ -30,6 +30,7 @@ VARIABLES: dict[str, tuple[str, dict[str, int]]] = {
     "Lam": ("costate of Σ, ∂J/∂Σ (symmetric)", {"cost": 1, "state": -2}),
     "lam_p": ("costate of the sensor position, ∂J/∂p", {"cost": 1, "length": -1}),
     "lam_v": ("costate of the sensor velocity, ∂J/∂v", {"cost": 1, "length": -1, "time": 1}),
+    "sigma_diag": ("error variance diag Σ(t) of the field at each state (grid cell centre)", {"state": 2}),
     "path_eps": ("ε of each accepted homotopy step (1: the original problem)", {}),
     "path_p": ("sensor position at each accepted homotopy step", {"length": 1}),
     "path_Sigma": ("error covariance at each accepted homotopy step", {"state": 2}),
@@ -47,6 +48,9 @@ COORDINATES: dict[str, tuple[str, dict[str, int]]] = {
     "row": ("row index of Σ and Λ (process state)", {}),
     "col": ("column index of Σ and Λ (process state)", {}),
     "step": ("index of the accepted homotopy step", {}),
+    "state": ("index j = ix + nx·iy of the field state (grid cell)", {}),
+    "state_x": ("x of the field state's cell centre", {"length": 1}),
+    "state_y": ("y of the field state's cell centre", {"length": 1}),
     "sensor": ("sensor name", {}),
     "xy": ("planar component", {}),
 }
@@ -73,6 +77,12 @@ def solution_dataset(solution: Any) -> Any:
         "time": s.t, "time_u": s.t_u, "sensor": [x.name for x in s.problem.sensors], "xy": ["x", "y"],
         "row": np.arange(n), "col": np.arange(n),
     }  # fmt: skip
+    if s.problem.process.field is not None:
+        locations = s.problem.process.field.process().locations
+        coords.update(state=np.arange(n), state_x=("state", locations[:, 0]), state_y=("state", locations[:, 1]))
+        arrays["sigma_diag"] = (("time", "state"), np.diagonal(s.Sigma, axis1=1, axis2=2))
+        if not s.stats.get("full_sigma", True):  # solver.shooting.full_sigma (default: n <= 25)
+            del arrays["Sigma"], coords["row"], coords["col"]
     if s.Lam is not None:
         coords["time_costate"] = s.t_costate
         arrays["Lam"] = (("time_costate", "row", "col"), s.Lam)
@@ -124,7 +134,7 @@ def solution_fields(ds: Any) -> dict[str, Any]:
         "message": str(a["message"]),
         "eps": float(a["eps"]),
         "t": ds["time"].values,
-        "Sigma": ds["Sigma"].values,
+        "Sigma": ds["Sigma"].values if "Sigma" in ds else None,
         "p": ds["p"].values,
         "v": ds["v"].values,
         "t_u": ds["time_u"].values,

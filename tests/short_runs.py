@@ -23,6 +23,28 @@ def small_solution(method: str = "direct", **changes: Any) -> Any:
     return ms.solve(ms.Problem.from_dict(data))
 
 
+def field_problem(grid: tuple[int, int] = (2, 2), sensors: int = 1, **solver: Any) -> dict[str, Any]:
+    """A small field problem (extent [0, 4]², Matérn-3/2, ℓ = 3, τ = 10, tf = 5) with point sensors on a line."""
+    return {
+        "name": "small_field",
+        "horizon": {"t0": 0.0, "tf": 5.0},
+        "process": {"field": {"grid": list(grid), "extent": [[0, 4], [0, 4]], "time_constant": 10.0,
+                              "kernel": {"type": "matern32", "length_scale": 3.0, "variance": 1.0}}},
+        "sensors": [{"name": f"g{i + 1}", "p0": [0.5 + i, 0.5], "v0": [0.0, 0.0], "measures": "point",
+                     "noise": {"model": "constant", "variance_value": 0.1}} for i in range(sensors)],
+        "cost": {"M": "mean", "K": "zero", "alpha": 0.05},
+        "solver": {"tolerance": 1e-10, **solver},
+    }  # fmt: skip
+
+
+def field_solution(**solver: Any) -> Any:
+    """The small field problem solved by the shooting method on 20 intervals."""
+    import mobisense as ms
+
+    shooting = {"intervals": 20, "coarse_intervals": 10, **solver.pop("shooting", {})}
+    return ms.solve(ms.Problem.from_dict(field_problem(shooting=shooting, **solver)))
+
+
 def _shortened(name: str, folder: Path, **changes: Any) -> Path:
     data = yaml.safe_load((PROBLEMS / f"{name}.yaml").read_text(encoding="utf-8"))
     data.update(changes)

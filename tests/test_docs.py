@@ -9,7 +9,7 @@ ROOT = Path(__file__).resolve().parents[1]
 THEORY = ROOT / "docs" / "theory"
 CITATION = re.compile(r"docs/theory/([a-z_]+)\.md(?: §(\d+(?:\.\d+)?))?")
 EQUATION = re.compile(r"\beq\. ((?:ocp|direct|indirect|cooperative|steady_state|hessian|formation_control|level_curve"
-                      r"|leader_follower|distributed|replay|path)\.\d+)")  # fmt: skip
+                      r"|leader_follower|distributed|replay|path|field)\.\d+)")  # fmt: skip
 
 
 def _sources() -> list[Path]:

@@ -28,7 +28,12 @@ def solve_task(payload: dict[str, Any]) -> dict[str, Any]:
         from ..direct.guesses import random_guess
 
         guess = random_guess(problem, payload["guess_seed"])
-    solution = solve_direct(problem, init=payload.get("seed"), guess=guess)
+    if problem.solver.method == "shooting":  # a field problem: no NLP point to warm-start from (cold solve)
+        from ..field_solve import solve_shooting
+
+        solution = solve_shooting(problem)
+    else:
+        solution = solve_direct(problem, init=payload.get("seed"), guess=guess)
     solution.reject_non_finite()
     cached = transcription_cache_hits() > hits
     row = {

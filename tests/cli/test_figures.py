@@ -40,9 +40,11 @@ def checked(monkeypatch):
 
         original(path, draw_and_check)
 
+    write_checked.recorder = True  # a module imported during an earlier test holds that test's recorder
     monkeypatch.setattr(files, "write_figure", write_checked)
     for name, module in list(sys.modules.items()):
-        if name.startswith("mobisense.") and getattr(module, "write_figure", None) is original:
+        bound = getattr(module, "write_figure", None)
+        if name.startswith("mobisense.") and (bound is original or getattr(bound, "recorder", False)):
             monkeypatch.setattr(module, "write_figure", write_checked)
     return found
 
@@ -104,6 +106,14 @@ def test_solve_figures_direct_and_indirect(checked, tmp_path):
     assert len(fig.axes) == 1  # one process state: one panel, not the same curve twice
     assert any("no control" in t.get_text() for t in fig.axes[0].get_legend().get_texts())  # the baseline
     plt.close(fig)
+
+
+@pytest.mark.slow
+def test_field_figures(checked, tmp_path):
+    from mobisense.ocp.plots import save_figures
+
+    save_figures(short_runs.field_solution(), tmp_path / "field")
+    _clean(checked, {f"field/{n}" for n in ("variance_maps.png", "trace.png", "controls.png", "homotopy.png")})
 
 
 @pytest.mark.slow

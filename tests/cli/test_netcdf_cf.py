@@ -32,6 +32,8 @@ def _files(folder: Path) -> dict[str, Path]:
     solution = short_runs.small_solution()
     solution.save(folder / "solve")
     out = {"solution.nc": folder / "solve" / "solution.nc"}
+    short_runs.field_solution(shooting={"full_sigma": False}).save(folder / "field")
+    out["field solution.nc"] = folder / "field" / "solution.nc"
     runs = {
         "plan replay": short_runs.plan_replay(folder, solution),
         "field replay": short_runs.field_replay(folder, duration=1.0),

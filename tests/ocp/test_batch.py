@@ -189,3 +189,21 @@ def test_timed_out_task_is_a_row_with_its_error():
                   warm_start=False)
     assert rows[0]["status"] == "failed" and "Maximum_WallTime_Exceeded" in rows[0]["error"]
     assert rows[1]["status"] == "solved"
+
+
+def test_sweep_of_a_field_problem_uses_the_shooting_method(tmp_path):
+    from short_runs import field_problem
+
+    from mobisense.ocp.field_solve import solve_shooting
+
+    base = field_problem(shooting={"intervals": 20, "coarse_intervals": 10})
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump(base))
+    spec = {"base": "base.yaml", "mode": "grid", "vary": {"cost.alpha": [0.02, 0.05]}}
+    (tmp_path / "sweep.yaml").write_text(yaml.safe_dump(spec))
+    out = tmp_path / "out"
+    assert cli.main(["sweep", str(tmp_path / "sweep.yaml"), "--out", str(out), "--workers", "1", "--quiet"]) == 0
+    rows = pd.read_parquet(out / "results.parquet")
+    assert set(rows["status"]) == {"solved"}
+    for _, row in rows.iterrows():
+        base["cost"]["alpha"] = row["cost.alpha"]
+        assert row["cost"] == pytest.approx(solve_shooting(Problem.from_dict(base)).cost, rel=1e-12)  # same solve

@@ -1,0 +1,249 @@
+"""A gridded Gaussian-random-field process and its point-measurement (kriging) rows (docs/theory/field.md).
+
+A scalar field f(s, t) over a planar extent is represented by its values at the ``nx × ny`` cell centres
+s_j (the process states, n = nx·ny, row-major with x fastest: j = ix + nx·iy). The space–time covariance
+is separable, Cov[f(s, t), f(s', t')] = k(s, s') e^(−|t−t'|/τ), so (docs/theory/field.md §1, eq. field.2)
+
+    A = −I/τ,   B = I,   Q = (2/τ) Kₛ,   Σ0 = Kₛ,   Kₛ = [k(s_i, s_j)] + jitter·σ²·I,
+
+and Kₛ is the stationary covariance (A Kₛ + Kₛ A' + Q = 0). A sensor with ``measures: point`` measures
+y = c(p)'x + e with the simple-kriging row c(p) = Kₛ⁻¹ k(p) (docs/theory/field.md §2, eq. field.3).
+
+The problem-file block is :class:`FieldSpec` (validated without allocating anything of size n²);
+:meth:`FieldSpec.process` builds the numeric :class:`FieldProcess` (cached).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+from typing import Annotated, Any, Literal
+
+import casadi as ca
+import numpy as np
+import scipy.linalg
+from pydantic import Field, model_validator
+
+from ..core.config import InvalidValue, PositiveFloat, StrictModel
+
+__all__ = [
+    "ShootingOptions","MAX_FIELD_STATES", "SHOOTING_MEMORY_LIMIT", "FieldKernel", "FieldSpec", "FieldProcess",
+           "shooting_substeps", "shooting_memory_bytes"]
+
+#: The largest grid nx·ny accepted: Kₛ and every Σ are dense n × n (n = 2500: 50 MB per matrix).
+MAX_FIELD_STATES = 2500
+
+
+#: The largest estimated working set of a shooting solve (bytes; the issue's 4 GB target for n = 100).
+SHOOTING_MEMORY_LIMIT = 4 * 1024**3
+
+
+def shooting_substeps(spec: FieldSpec, noise_variances: list[float], duration: float, intervals: int,
+                      max_h_lambda: float = 0.25) -> int:  # fmt: skip
+    """Möbius-RK4 steps per interval so that h·λ_max ≤ ``max_h_lambda`` (docs/theory/field.md §3.3).
+
+    λ_max = sqrt(a² + 2a Σ_i σ²/r_i) (a = 1/τ) bounds the eigenvalues of the linear Hamiltonian system
+    for every sensor configuration (c̃'c̃ = k'Kₛ⁻¹k ≤ σ²). 0.25 is an accuracy target: cost error
+    9e-8 relative at K = 100 (m = 2) against 1.2e-6 at m = 1.
+    """
+    a = 1.0 / spec.time_constant
+    info = sum(spec.kernel.variance / r for r in noise_variances)
+    h = duration / intervals
+    return max(1, math.ceil(h * math.sqrt(a * a + 2.0 * a * info) / max_h_lambda - 1e-9))
+
+
+def shooting_memory_bytes(n: int, intervals: int, substeps: int) -> int:
+    """Estimated peak memory (bytes) of the shooting NLP: 8 n² ((K+1)(4m+2) + 3).
+
+    The adjoint sweep keeps every interval's whitened Z and, per substep, about four n × n temporaries
+    (measured at n = 100, K = 100, m = 2: 85 MB above the interpreter's 95 MB; this formula gives 81 MB).
+    """
+    return 8 * n * n * ((intervals + 1) * (4 * substeps + 2) + 3)
+
+
+class FieldKernel(StrictModel):
+    """A stationary isotropic covariance kernel k(r) = σ² ρ(r/ℓ) (docs/theory/field.md, eq. field.1)."""
+
+    type: Literal["matern32", "squared_exponential", "exponential"] = Field(
+        "matern32",
+        description="matern32: σ²(1+√3r/ℓ)e^(−√3r/ℓ); squared_exponential: σ²e^(−r²/2ℓ²); exponential: σ²e^(−r/ℓ)",
+    )
+    length_scale: PositiveFloat = Field(description="correlation length ℓ (L)")
+    variance: PositiveFloat = Field(1.0, description="marginal variance σ² (state²)")
+
+    def of_distance(self, r: Any) -> Any:
+        """K at distance ``r`` (L): numpy array or CasADi expression, the same type back (state²)."""
+        lib = ca if isinstance(r, (ca.SX, ca.MX, ca.DM)) else np
+        ell, var = self.length_scale, self.variance
+        if self.type == "matern32":
+            a = np.sqrt(3.0) * r / ell
+            return var * (1.0 + a) * lib.exp(-a)
+        if self.type == "squared_exponential":
+            return var * lib.exp(-0.5 * (r / ell) ** 2)
+        return var * lib.exp(-r / ell)
+
+    @property
+    def cutoff_distance(self) -> float:
+        """Distance (L) beyond which the symbolic kernel is held at k(r_c) ≈ 1e-20 σ² (no underflow).
+
+        Products of kernel values far below 1e-150 made a small LU/QR solve return NaN during trial
+        steps; the cut-off changes c(p) by less than 1e-20.
+        """
+        ell = self.length_scale
+        if self.type == "squared_exponential":
+            return float(np.sqrt(2.0 * 46.0) * ell)
+        if self.type == "exponential":
+            return 46.0 * ell
+        return float(50.8 / np.sqrt(3.0) * ell)  # (1 + a) e^(−a) = 1e-20 at a ≈ 50.8
+
+
+class FieldSpec(StrictModel):
+    """``process.field``: the gridded field whose A, B, Q, Σ0 and state locations are derived."""
+
+    grid: list[int] = Field(min_length=2, max_length=2, description="[nx, ny] cells; n = nx·ny states")
+    extent: list[Annotated[list[float], Field(min_length=2, max_length=2)]] = Field(
+        min_length=2, max_length=2, description="[[x_min, x_max], [y_min, y_max]] (L)"
+    )
+    kernel: FieldKernel = Field(description="spatial covariance kernel {type, length_scale, variance}")
+    time_constant: PositiveFloat = Field(description="τ (T): A = −I/τ, Q = 2Kₛ/τ")
+    jitter: float = Field(1e-8, ge=1e-12, le=1e-4, description="relative nugget, raised ×10 until cond(Kₛ) ≤ 1e8")
+
+    @model_validator(mode="after")
+    def _checks(self) -> FieldSpec:
+        nx, ny = self.grid
+        if nx < 1 or ny < 1:
+            raise InvalidValue("grid", f"expected two integers >= 1, got [{nx}, {ny}]")
+        if nx * ny > MAX_FIELD_STATES:
+            raise InvalidValue(
+                "grid",
+                f"expected nx·ny <= {MAX_FIELD_STATES} states (dense n×n covariances), got {nx}×{ny} = {nx * ny}",
+            )
+        for axis, (lo, hi) in zip("xy", self.extent, strict=True):
+            if not (np.isfinite(lo) and np.isfinite(hi) and hi > lo):
+                raise InvalidValue("extent", f"expected finite {axis}_max > {axis}_min, got [{lo:g}, {hi:g}]")
+        return self
+
+    @property
+    def n(self) -> int:
+        """Number of states nx·ny."""
+        return self.grid[0] * self.grid[1]
+
+    def locations(self) -> np.ndarray:
+        """Cell centres (n, 2) (L), row-major with x fastest (no n × n allocation)."""
+        (nx, ny), ((x0, x1), (y0, y1)) = self.grid, self.extent
+        X, Y = np.meshgrid(x0 + (np.arange(nx) + 0.5) * (x1 - x0) / nx, y0 + (np.arange(ny) + 0.5) * (y1 - y0) / ny)
+        return np.column_stack([X.ravel(), Y.ravel()])
+
+    def process(self) -> FieldProcess:
+        """The numeric field (Kₛ, its inverse, the locations), built once per distinct spec."""
+        return _build(self.model_dump_json())
+
+
+class ShootingOptions(StrictModel):
+    """Reduced-space shooting for field problems (docs/theory/field.md §3): only the controls are NLP variables.
+
+    The ε-homotopy runs on ``coarse_intervals``, then one ε = 1 solve on ``intervals`` from its controls.
+    """
+
+    intervals: int = Field(100, ge=2, le=10_000, description="K control intervals of the final solve")
+    coarse_intervals: int = Field(25, ge=2, le=10_000, description="intervals of the ε-homotopy")
+    substeps: int | None = Field(None, ge=1, le=1000, description="RK4 steps per interval (default: h·λ ≤ 0.25)")
+    memory: int = Field(30, ge=2, le=500, description="L-BFGS history length")
+    homotopy: list[float] = Field([0.03, 0.1, 0.2, 0.4, 0.7, 1.0], min_length=1, description="coarse ε schedule")
+    homotopy_tolerance: float = Field(1e-5, gt=0.0, lt=1.0, description="Ipopt tol of the coarse steps")
+    coarse_max_iterations: int = Field(300, ge=1, description="Ipopt iterations per coarse step")
+    full_sigma: bool | None = Field(None, description="write the full Σ(t) to solution.nc (default: n <= 25)")
+
+    @model_validator(mode="after")
+    def _schedule(self) -> ShootingOptions:
+        eps = self.homotopy
+        increasing = all(b > a for a, b in zip(eps, eps[1:], strict=False))
+        if any(not 0 < e <= 1 for e in eps) or not increasing or eps[-1] != 1.0:
+            raise InvalidValue("homotopy", f"expected increasing ε in (0, 1] ending at 1, got {eps}")
+        return self
+
+
+@functools.lru_cache(maxsize=8)
+def _build(spec_json: str) -> FieldProcess:
+    return FieldProcess(FieldSpec.model_validate_json(spec_json))
+
+
+@dataclass
+class FieldProcess:
+    """The numbers of a :class:`FieldSpec`: locations (n, 2), Kₛ (n, n) and Kₛ⁻¹, the jitter used.
+
+    The jitter starts at ``spec.jitter``·σ² and is multiplied by 10 (up to 1e-4) until the Cholesky
+    factorisation succeeds and cond(Kₛ) ≤ 1e8, so the kriging weights keep about 8 digits
+    (docs/theory/field.md §1). The smoothing δ (L) of the distances r = sqrt(|p − s|² + δ²) keeps c(p)
+    differentiable at a node: 1e-6·ℓ (Matérn, squared exponential), 1e-2·h_min (exponential: a cusp).
+    """
+
+    spec: FieldSpec
+    locations: np.ndarray = field(init=False, repr=False)
+    Ks: np.ndarray = field(init=False, repr=False)
+    Ks_inv: np.ndarray = field(init=False, repr=False)
+    chol: np.ndarray = field(init=False, repr=False)
+    jitter_used: float = field(init=False)
+    smoothing: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        s = self.spec
+        (nx, ny), ((x0, x1), (y0, y1)) = s.grid, s.extent
+        self.locations = s.locations()
+        h_min = min((x1 - x0) / nx, (y1 - y0) / ny)
+        ell = s.kernel.length_scale
+        self.smoothing = 1e-2 * h_min if s.kernel.type == "exponential" else 1e-6 * ell
+        d = np.sqrt(((self.locations[:, None, :] - self.locations[None, :, :]) ** 2).sum(-1))
+        K = s.kernel.of_distance(d)
+        var, jitter = s.kernel.variance, s.jitter
+        while True:
+            Ks = K + jitter * var * np.eye(self.n)
+            lam = np.linalg.eigvalsh(Ks)
+            if lam[0] > 0 and lam[-1] / lam[0] <= 1e8:
+                break
+            if jitter >= 1e-4:
+                raise InvalidValue("process.field.kernel", f"kernel matrix is singular even with jitter {jitter:g}·σ²")
+            jitter *= 10.0
+        self.jitter_used, self.Ks = jitter, Ks
+        self.chol = np.linalg.cholesky(Ks)
+        inv = scipy.linalg.cho_solve((self.chol, True), np.eye(self.n))
+        self.Ks_inv = 0.5 * (inv + inv.T)
+
+    @property
+    def n(self) -> int:
+        """Number of states."""
+        return self.spec.n
+
+    def matrices(self) -> dict[str, np.ndarray]:
+        """A = −I/τ, B = I, Q = 2Kₛ/τ, Sigma0 = Kₛ (all n × n) and locations (n, 2) — eq. field.2."""
+        tau, n = self.spec.time_constant, self.n
+        return {"A": -np.eye(n) / tau, "B": np.eye(n), "Q": 2.0 * self.Ks / tau, "Sigma0": self.Ks.copy(),
+                "locations": self.locations.copy()}  # fmt: skip
+
+    def cross_covariance(self, p: np.ndarray) -> np.ndarray:
+        """k(p) = [k(p, s_j)]_j for points p (m, 2) → (m, n), with the smoothing of the symbolic form."""
+        d2 = ((np.atleast_2d(p)[:, None, :] - self.locations[None, :, :]) ** 2).sum(-1)
+        return self.spec.kernel.of_distance(np.sqrt(d2 + self.smoothing**2))
+
+    def weights(self, p: np.ndarray) -> np.ndarray:
+        """Simple-kriging rows c(p)' = (Kₛ⁻¹ k(p))' for points p (m, 2) → (m, n) — eq. field.3."""
+        return self.cross_covariance(p) @ self.Ks_inv
+
+    def symbolic_cross_covariance(self, px: Any, py: Any, loc: Any) -> Any:
+        """k(p_i, s_j) as a CasADi (n, N) matrix for position rows px, py (1, N) and locations ``loc`` (n, 2)."""
+        n = loc.size1() if hasattr(loc, "size1") else len(loc)
+        ones = ca.DM.ones(n, 1)
+        dx = ca.repmat(loc[:, 0], 1, px.size2()) - ca.mtimes(ones, px)
+        dy = ca.repmat(loc[:, 1], 1, py.size2()) - ca.mtimes(ones, py)
+        r = ca.fmin(ca.sqrt(dx**2 + dy**2 + self.smoothing**2), self.spec.kernel.cutoff_distance)
+        return self.spec.kernel.of_distance(r)
+
+    def symbolic_weights(self, p: Any, Ks_inv: Any, loc: Any) -> Any:
+        """The kriging column c(p) = Kₛ⁻¹ k(p) (n, 1) for a symbolic position ``p`` (2, 1)."""
+        return ca.mtimes(Ks_inv, self.symbolic_cross_covariance(p[0], p[1], loc))
+
+    def to_grid(self, values: np.ndarray) -> np.ndarray:
+        """Per-state values (..., n) as (..., ny, nx) for maps."""
+        nx, ny = self.spec.grid
+        return np.asarray(values).reshape(*np.shape(values)[:-1], ny, nx)

@@ -1,0 +1,68 @@
+"""Figures of a field problem: the error-variance maps diag Σ at t0 and tf with the paths, and Tr Σ(t).
+
+``variance_maps.png``: diag Σ on the grid at t0 (the stationary prior), at tf under the optimal paths
+(drawn on top: start ○, end △), and at tf without control; ``trace.png``: Tr Σ(t) against the
+no-control baseline. The baseline comes from the solution (``baseline["sigma_diag_tf"]`` and
+``baseline["trace_Sigma"]``, computed by the solver on the same grid).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .solution import Solution
+
+__all__ = ["FIELD_FIGURES", "plot_variance_maps", "plot_trace"]
+
+
+def _label(solution: Solution, **powers: int) -> str:
+    return solution.problem.units.system().label(**powers)
+
+
+def plot_variance_maps(solution: Solution):  # noqa: ANN201  (matplotlib Figure)
+    """Diag Σ on the grid at t0, at tf with the optimal paths, and at tf without control (one colour scale)."""
+    import matplotlib.pyplot as plt
+
+    spec = solution.problem.process.field
+    field = spec.process()
+    (x0, x1), (y0, y1) = spec.extent
+    nx, ny = spec.grid
+    xe, ye = np.linspace(x0, x1, nx + 1), np.linspace(y0, y1, ny + 1)
+    diag = np.diagonal(solution.Sigma, axis1=1, axis2=2)
+    t, p = solution.t, solution.p
+    panels = [(f"t = {t[0]:g}: prior", diag[0], False), (f"t = {t[-1]:g}: optimal paths", diag[-1], True)]
+    if "sigma_diag_tf" in solution.baseline:
+        panels.append((f"t = {t[-1]:g}: no control", np.asarray(solution.baseline["sigma_diag_tf"]), False))
+    vmax = float(diag.max())
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 4.4), constrained_layout=True, squeeze=False)
+    length, variance = _label(solution, length=1), _label(solution, state=2)
+    for ax, (title, values, paths) in zip(axes[0], panels, strict=True):
+        mesh = ax.pcolormesh(xe, ye, field.to_grid(values), vmin=0.0, vmax=vmax, cmap="viridis", shading="flat")
+        ax.plot(*field.locations.T, "k.", ms=2, alpha=0.5)
+        for i, sensor in enumerate(solution.problem.sensors):
+            ax.plot(p[0, i, 0], p[0, i, 1], "wo", ms=5, mec="k", zorder=3)
+            if paths:
+                ax.plot(p[:, i, 0], p[:, i, 1], "w-", lw=1.6, zorder=2)
+                ax.plot(p[-1, i, 0], p[-1, i, 1], "w^", ms=7, mec="k", zorder=3)
+                ax.annotate(sensor.name, p[-1, i], color="w", fontsize=8, xytext=(4, 4), textcoords="offset points")
+        ax.set(title=f"{title}\nTr Σ = {values.sum():.4g} {variance}", xlabel=f"x ({length})",
+               ylabel=f"y ({length})", aspect="equal")  # fmt: skip
+    fig.colorbar(mesh, ax=axes[0].tolist(), label=f"error variance diag Σ ({variance})")
+    return fig
+
+
+def plot_trace(solution: Solution):  # noqa: ANN201
+    """Tr Σ(t) of the optimum and of the no-control baseline."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    if "trace_Sigma" in solution.baseline:
+        ax.plot(solution.t, solution.baseline["trace_Sigma"], "--", color="0.35", label="no control (u ≡ 0)")
+    ax.plot(solution.t, np.trace(solution.Sigma, axis1=1, axis2=2), lw=2, label="optimal paths")
+    ax.set(xlabel=f"time ({_label(solution, time=1)})", ylabel=f"Tr Σ(t) ({_label(solution, state=2)})",
+           title="total error variance of the field", ylim=(0, None))  # fmt: skip
+    ax.legend()
+    return fig
+
+
+FIELD_FIGURES = {"variance_maps.png": plot_variance_maps, "trace.png": plot_trace}

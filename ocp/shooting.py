@@ -1,0 +1,229 @@
+"""Reduced-space shooting for field problems: the controls are the only NLP variables (docs/theory/field.md §3).
+
+u_i(t) is continuous and piecewise linear on K uniform intervals (nodes u_{i,0..K}: 2N(K+1) numbers);
+the double integrator is integrated exactly (eq. field.7); Σ is propagated in whitened coordinates by
+``m`` Möbius-RK4 steps per interval (:mod:`mobisense.ocp.mobius`, O(n²N) each); the cost
+
+    J_ε = ε Tr[M Σ(tf)] + ∫ (α/2 Σ_i |u_i|² + Tr[K Σ]) dt                 (eq. field.8)
+
+is a CasADi MX graph of the K interval calls, so its gradient is the exact discrete adjoint. Ipopt
+solves the NLP with a limited-memory BFGS Hessian. Fixed terminal p/v are linear constraints and
+|u_i| ≤ u_max holds exactly at the nodes (|u(t)| is convex on each interval).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from .field import shooting_substeps
+from .mobius import mobius_rk4_step
+from .problem import Problem
+
+__all__ = ["ShootingTrajectory", "FieldShooting", "substeps_for"]
+
+
+def substeps_for(problem: Problem, intervals: int, max_h_lambda: float = 0.25) -> int:
+    """Substeps of :func:`~mobisense.ocp.field.shooting_substeps` for ``problem`` on ``intervals``."""
+    return shooting_substeps(problem.process.field, [s.noise.parameters()[0] for s in problem.sensors],
+                             problem.horizon.tf - problem.horizon.t0, intervals, max_h_lambda)  # fmt: skip
+
+
+@dataclass
+class ShootingTrajectory:
+    """Node values on the K+1 times ``t`` (T): ``Sigma`` (K+1, n, n), ``p``, ``v``, ``u`` (K+1, N, 2), costs."""
+
+    t: np.ndarray
+    Sigma: np.ndarray
+    p: np.ndarray
+    v: np.ndarray
+    u: np.ndarray
+    costs: tuple[float, float, float]  # terminal Tr[MΣ(tf)], running ∫(α/2|u|² + Tr KΣ), control energy
+
+
+class FieldShooting:
+    """The reduced NLP of one field problem on K intervals with m substeps: build once, solve many ε.
+
+    Parameters
+    ----------
+    problem : Problem
+        A problem with ``process.field`` and point sensors.
+    intervals : int
+        K.
+    substeps : int, optional
+        m; default :func:`substeps_for` (at least 4 with a running weight K ≠ 0: the endpoint quadrature of
+        ∫Tr KΣ then has a relative error below 1e-6).
+    scaling : {"kinematic", "energy"}
+        Unit of the NLP variables: u / (L/T²) (``kinematic``, as the direct method) or u·sqrt(αh/J₀)
+        (``energy``: the control-energy Hessian ≈ I; faster for the small-ε homotopy steps).
+    """
+
+    def __init__(self, problem: Problem, intervals: int, substeps: int | None = None,
+                 scaling: str = "kinematic", max_h_lambda: float = 0.25) -> None:  # fmt: skip
+        t_build = time.perf_counter()
+        self.problem = problem
+        self.field = problem.process.field.process()
+        self.n, self.N, self.K = n, N, K = problem.n, problem.N, intervals
+        mats = problem.matrices()
+        self.M, self.Kw = mats["M"], mats["K"]
+        self.running_state_cost = bool(np.any(self.Kw != 0))
+        self.m = substeps or substeps_for(problem, K, max_h_lambda)
+        if substeps is None and self.running_state_cost:
+            self.m = max(self.m, 4)
+        self.scaling = scaling
+        self.L = self.field.chol
+        self.Linv = np.linalg.solve(self.L, np.eye(n))
+        self.nw = 2 * N * (K + 1)
+        T = problem.horizon.tf - problem.horizon.t0
+        self.h = h = T / K
+        w = ca.MX.sym("w", self.nw)
+        self.P = P = ca.MX.sym("P", 3)  # ε, cost scale, control scale
+        eps, cost_scale, u_scale = P[0], P[1], P[2]
+        U = ca.reshape(w, 2 * N, K + 1) * u_scale
+        pos = [ca.DM(np.concatenate([s.p0 for s in problem.sensors]))]
+        vel = [ca.DM(np.concatenate([s.v0 for s in problem.sensors]))]
+        for k in range(K):  # eq. field.7: exact for piecewise-linear u
+            uk, uk1 = U[:, k], U[:, k + 1]
+            pos.append(pos[-1] + h * vel[-1] + h**2 * (uk / 3 + uk1 / 6))
+            vel.append(vel[-1] + h * (uk + uk1) / 2)
+        F = self._interval_function()
+        Z = ca.DM(self.Linv @ mats["Sigma0"] @ self.Linv.T).reshape((n * n, 1))
+        Zs, running, energy = [Z], 0, 0
+        for k in range(K):
+            Z, q = F(Z, ca.vertcat(pos[k], vel[k], U[:, k], U[:, k + 1]))
+            Zs.append(Z)
+            running += q
+            uk, uk1 = U[:, k], U[:, k + 1]
+            energy += h / 3 * (ca.sumsqr(uk) + ca.dot(uk, uk1) + ca.sumsqr(uk1))
+        energy = 0.5 * problem.cost.alpha * energy
+        phi = ca.sum1(ca.sum2(ca.DM(self.L.T @ self.M @ self.L) * ca.reshape(Z, n, n)))  # Tr[MΣ] = Tr[L'ML Z]
+        objective = (eps * phi + running + energy) / cost_scale
+        g, self.lbg, self.ubg = self._constraints(pos[K], vel[K], U, u_scale)
+        self.nlp = {"x": w, "p": P, "f": objective, "g": g}
+        self.cost_terms = ca.Function("cost_terms", [w, P], [phi, running + energy, energy])
+        self.trajectory = ca.Function("trajectory", [w, P], [ca.horzcat(*Zs), ca.horzcat(*pos), ca.horzcat(*vel), U])
+        self.solvers: dict[float, Any] = {}
+        self.build_time_s = time.perf_counter() - t_build
+
+    def _constraints(self, pK: Any, vK: Any, U: Any, u_scale: Any) -> tuple[Any, np.ndarray, np.ndarray]:
+        g: list[Any] = []
+        lbg: list[float] = []
+        ubg: list[float] = []
+        length = self.length_scale()
+        T = self.problem.horizon.tf - self.problem.horizon.t0
+        for i, s in enumerate(self.problem.sensors):
+            for key, end, scale in (("p", pK, length), ("v", vK, length / T)):
+                target = None if s.terminal is None else getattr(s.terminal, key)
+                if target is not None:
+                    g.append((end[2 * i : 2 * i + 2] - ca.DM(target)) / scale)
+                    lbg += [0.0, 0.0]
+                    ubg += [0.0, 0.0]
+            if s.u_max is not None:
+                for k in range(self.K + 1):
+                    g.append((ca.sumsqr(U[2 * i : 2 * i + 2, k]) - s.u_max**2) / u_scale**2)
+                    lbg.append(-np.inf)
+                    ubg.append(0.0)
+        return (ca.vertcat(*g) if g else ca.MX(0, 1)), np.array(lbg), np.array(ubg)
+
+    def length_scale(self) -> float:
+        """The largest sensor–state distance at the start, at least 1 (L): the kinematic unit."""
+        return max(1.0, *(np.linalg.norm(np.asarray(s.p0) - self.field.locations, axis=1).max()
+                          for s in self.problem.sensors))  # fmt: skip
+
+    def parameters(self, eps: float, cost_scale: float) -> np.ndarray:
+        """NLP parameters [ε, cost scale, control scale] (control scale in L/T²)."""
+        T = self.problem.horizon.tf - self.problem.horizon.t0
+        if self.scaling == "energy":
+            u_scale = math.sqrt(cost_scale / (self.problem.cost.alpha * self.h))
+        else:
+            speed = max(self.length_scale() / T, *(np.linalg.norm(s.v0) for s in self.problem.sensors))
+            u_scale = speed / T
+        return np.array([eps, cost_scale, u_scale])
+
+    def _interval_function(self) -> ca.Function:
+        """Z_{k+1}, ∫_k Tr[K̃Z] dt from Z_k (n², column-major) and z = [p_k, v_k, u_k, u_{k+1}] (8N,)."""
+        n, N, m, h = self.n, self.N, self.m, self.h
+        sig, z = ca.MX.sym("z_sigma", n * n), ca.MX.sym("z", 8 * N)
+        dt = h / m
+        pk, vk, uk, uk1 = z[: 2 * N], z[2 * N : 4 * N], z[4 * N : 6 * N], z[6 * N :]
+        tau = self.problem.process.field.time_constant
+        a, q = 1.0 / tau, 2.0 / tau
+        rinv = ca.DM([1.0 / s.noise.parameters()[0] for s in self.problem.sensors])
+        loc, Linv = ca.DM(self.field.locations), ca.DM(self.Linv)
+        Kt = ca.DM(self.L.T @ self.Kw @ self.L)
+        cache: dict[int, tuple[Any, Any]] = {}
+
+        def rows_at(key: int) -> tuple[Any, Any]:
+            """C̃ (N × n) and 1/r (N, 1) at local time key·dt/2 from the exact cubic path."""
+            if key not in cache:
+                s = key * dt / 2
+                p = pk + vk * s + uk * s**2 / 2 + (uk1 - uk) * s**3 / (6 * h)
+                px = ca.horzcat(*[p[2 * i] for i in range(N)])
+                py = ca.horzcat(*[p[2 * i + 1] for i in range(N)])
+                cache[key] = (ca.mtimes(Linv, self.field.symbolic_cross_covariance(px, py, loc)).T, rinv)
+            return cache[key]
+
+        def trace_K(X: Any) -> Any:
+            return ca.sum1(ca.sum2(Kt * X))
+
+        def riccati(Z: Any, C: Any, r_inv: Any) -> Any:  # eq. field.5
+            G = ca.mtimes(Z, C.T)
+            return -2 * a * Z + q * ca.MX.eye(n) - ca.mtimes(G * ca.repmat(r_inv.T, n, 1), G.T)
+
+        Z = ca.reshape(sig, n, n)
+        quad = 0
+        for j in range(m):
+            rows = [rows_at(2 * j), rows_at(2 * j + 1), rows_at(2 * j + 2)]
+            Z_next = mobius_rk4_step(Z, rows, a, q, dt)
+            if self.running_state_cost:  # cubic Hermite quadrature (order 4) with Z' from eq. field.5
+                d0, d1 = trace_K(riccati(Z, *rows[0])), trace_K(riccati(Z_next, *rows[2]))
+                quad += dt / 2 * (trace_K(Z) + trace_K(Z_next)) + dt**2 / 12 * (d0 - d1)
+            Z = Z_next
+        return ca.Function("interval", [sig, z], [ca.vec(Z), quad])
+
+    def solve(self, w: np.ndarray, eps: float, cost_scale: float, tolerance: float, max_iterations: int,
+              memory: int, time_limit: float | None = None) -> tuple[np.ndarray, dict[str, Any]]:  # fmt: skip
+        """Ipopt (L-BFGS) from the scaled controls ``w`` (nw,); returns the new w and Ipopt's record."""
+        key = (tolerance, max_iterations)
+        if key not in self.solvers:
+            ipopt = {"tol": tolerance, "max_iter": max_iterations, "print_level": 0, "sb": "yes",
+                     "hessian_approximation": "limited-memory", "limited_memory_max_history": memory,
+                     "mu_init": 1e-2 if self.lbg.size else 1e-1}  # fmt: skip
+            if time_limit is not None:
+                ipopt["max_wall_time"] = float(time_limit)
+            self.solvers[key] = ca.nlpsol("field_shooting", "ipopt", self.nlp,
+                                          {"ipopt": ipopt, "print_time": False, "error_on_fail": False})  # fmt: skip
+        solver = self.solvers[key]
+        sol = solver(x0=w, p=self.parameters(eps, cost_scale), lbg=self.lbg, ubg=self.ubg)
+        stats = solver.stats()
+        return np.asarray(sol["x"]).ravel(), {
+            "status": str(stats["return_status"]), "success": bool(stats["success"]),
+            "iterations": int(stats["iter_count"]),
+        }  # fmt: skip
+
+    def evaluate(self, w: np.ndarray, cost_scale: float = 1.0) -> ShootingTrajectory:
+        """Trajectory and the cost split at ε = 1 of the scaled controls ``w``."""
+        P = self.parameters(1.0, cost_scale)
+        Zs, pos, vel, U = (np.asarray(v) for v in self.trajectory(w, P))
+        n, N, K = self.n, self.N, self.K
+        Z = Zs.reshape(n, n, K + 1, order="F").transpose(2, 0, 1)
+        Sigma = self.L @ Z @ self.L.T
+        Sigma = 0.5 * (Sigma + Sigma.transpose(0, 2, 1))
+        t0 = self.problem.horizon.t0
+        phi, run, en = (float(v) for v in self.cost_terms(w, P))
+        return ShootingTrajectory(
+            t=t0 + self.h * np.arange(K + 1), Sigma=Sigma, p=pos.T.reshape(K + 1, N, 2),
+            v=vel.T.reshape(K + 1, N, 2), u=U.T.reshape(K + 1, N, 2), costs=(phi, run, en),
+        )  # fmt: skip
+
+    def controls_to_w(self, t: np.ndarray, u: np.ndarray, cost_scale: float) -> np.ndarray:
+        """Scaled NLP vector (nw,) from controls ``u`` (T', N, 2) (L/T²) at times ``t`` (T',), linearly interpolated."""
+        t_new = self.problem.horizon.t0 + self.h * np.arange(self.K + 1)
+        flat = np.asarray(u, float).reshape(len(t), -1)
+        U = np.column_stack([np.interp(t_new, t, flat[:, j]) for j in range(flat.shape[1])])
+        return (U.T / self.parameters(1.0, cost_scale)[2]).ravel(order="F")

@@ -1,0 +1,218 @@
+"""Field processes, point sensors and the reduced-space shooting method (docs/theory/field.md).
+
+Independent references: the stationary Lyapunov equation, the kriging identity at the nodes, scipy's
+DOP853 on the full Riccati equation, central finite differences, and the direct collocation.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from short_runs import field_problem
+
+import mobisense as ms
+from mobisense.core.config import ConfigError
+from mobisense.ocp.field import FieldSpec
+from mobisense.ocp.shooting import FieldShooting
+
+
+def _spec(grid=(3, 3), kernel="matern32", length=3.0):
+    return FieldSpec(grid=list(grid), extent=[[0.0, 10.0], [0.0, 10.0]], time_constant=20.0,
+                     kernel={"type": kernel, "length_scale": length, "variance": 1.0})  # fmt: skip
+
+
+def _problem(**changes):
+    data = field_problem(**changes.pop("solver", {}))
+    data.update(changes)
+    return ms.Problem.from_dict(data)
+
+
+@pytest.mark.parametrize("kernel", ["matern32", "squared_exponential", "exponential"])
+def test_field_matrices_make_the_kernel_the_stationary_covariance(kernel):
+    m = _spec(kernel=kernel).process().matrices()
+    residual = m["A"] @ m["Sigma0"] + m["Sigma0"] @ m["A"].T + m["B"] @ m["Q"] @ m["B"].T
+    assert np.abs(residual).max() < 1e-15  # exact up to rounding of entries <= 1/τ·σ²
+
+
+def test_jitter_is_raised_until_the_squared_exponential_kernel_is_well_conditioned():
+    process = _spec(grid=(10, 10), kernel="squared_exponential").process()
+    assert process.jitter_used > 1e-8  # measured: cond 3.5e9 at 1e-8
+    assert np.linalg.cond(process.Ks) <= 1e8 * (1 + 1e-6)
+
+
+def test_kriging_rows_are_exact_at_the_nodes_and_match_the_symbolic_form():
+    process = _spec().process()
+    # c(s_j) = e_j up to the jitter 1e-8 σ² times ‖Kₛ⁻¹‖ (λ_min ≈ 0.07 on 3×3: ≲ 1e-6)
+    assert np.abs(process.weights(process.locations) - np.eye(9)).max() < 1e-6
+    p = ca.SX.sym("p", 2)
+    c = ca.Function("c", [p], [process.symbolic_weights(p, ca.DM(process.Ks_inv), ca.DM(process.locations))])
+    for point in ([1.3, 7.1], [5.0, 5.0], list(process.locations[4])):
+        assert np.allclose(np.asarray(c(point)).ravel(), process.weights(np.array([point]))[0], atol=1e-14)
+    jac = ca.Function("j", [p], [ca.jacobian(c(p), p)])(process.locations[4])
+    assert np.all(np.isfinite(np.asarray(jac)))  # the smoothing δ removes the 0/0 at a node
+
+
+def test_nothing_measured_keeps_the_stationary_prior():
+    problem = _problem(sensors=[{"name": "far", "p0": [900.0, 900.0], "v0": [0, 0], "measures": "point",
+                                 "noise": {"model": "constant", "variance_value": 0.1}}])  # fmt: skip
+    shooting = FieldShooting(problem, 10)
+    Sigma = shooting.evaluate(np.zeros(shooting.nw)).Sigma
+    Ks = problem.process.field.process().Ks
+    assert np.abs(Sigma - Ks).max() < 1e-12  # beyond the cut-off the rows are 1e-20σ²: Σ' = 0 to rounding
+
+
+def _cubic_positions(problem, t_nodes, u):
+    """p(t) of the exact double integrator with piecewise-linear u (independent of eq. field.7)."""
+    p0 = np.array([s.p0 for s in problem.sensors], float)
+    v0 = np.array([s.v0 for s in problem.sensors], float)
+    h = t_nodes[1] - t_nodes[0]
+    ps, vs = [p0], [v0]
+    for k in range(len(t_nodes) - 1):
+        ps.append(ps[-1] + h * vs[-1] + h**2 * (u[k] / 3 + u[k + 1] / 6))
+        vs.append(vs[-1] + h * (u[k] + u[k + 1]) / 2)
+
+    def at(t):
+        k = min(int((t - t_nodes[0]) / h), len(t_nodes) - 2)
+        s = t - t_nodes[k]
+        return ps[k] + vs[k] * s + u[k] * s**2 / 2 + (u[k + 1] - u[k]) * s**3 / (6 * h)
+
+    return at
+
+
+def test_mobius_rk4_matches_dop853_at_order_four():
+    problem = _problem(sensors=[{"name": f"g{i}", "p0": [0.5 + i, 0.5], "v0": [0.1, 0.2], "measures": "point",
+                                 "noise": {"model": "constant", "variance_value": 0.05}} for i in range(2)])
+    process, mats = problem.process.field.process(), problem.matrices()
+    rng = np.random.default_rng(3)
+    K = 20
+    u = 0.3 * rng.standard_normal((K + 1, 2, 2))
+    t_nodes = np.linspace(0.0, 5.0, K + 1)
+    at = _cubic_positions(problem, t_nodes, u)
+
+    def riccati(t, y):  # eq. ocp.7 with eq. field.4
+        S = y.reshape(4, 4)
+        C = process.weights(at(t))
+        return (mats["A"] @ S + S @ mats["A"].T + mats["BQB"] - S @ C.T @ C @ S / 0.05).ravel()
+
+    ref = solve_ivp(riccati, (0, 5), mats["Sigma0"].ravel(), method="DOP853", rtol=1e-12, atol=1e-14,
+                    max_step=5.0 / K / 4).y[:, -1].reshape(4, 4)  # fmt: skip
+    errors = []
+    for m in (1, 2, 4):
+        shooting = FieldShooting(problem, K, substeps=m)
+        w = shooting.controls_to_w(t_nodes, u, 1.0)
+        errors.append(np.abs(shooting.evaluate(w).Sigma[-1] - ref).max())
+    # measured 5.6e-6, 3.7e-7, 2.3e-8 (|Σ| ≤ 1; step 0.25/m with r = 0.05, twice the defaults' stiffness)
+    assert errors[1] < 1e-6
+    orders = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
+    assert orders.min() > 3.5, (errors, orders)  # RK4: 4
+
+
+def test_gradient_is_the_exact_discrete_adjoint():
+    problem = _problem(sensors=[{"name": "g", "p0": [0.5, 0.5], "v0": [0, 0], "measures": "point",
+                                 "noise": {"model": "constant", "variance_value": 0.1}}])  # fmt: skip
+    shooting = FieldShooting(problem, 10)
+    f = ca.Function("f", [shooting.nlp["x"], shooting.nlp["p"]], [shooting.nlp["f"]])
+    grad = ca.Function("g", [shooting.nlp["x"], shooting.nlp["p"]], [ca.gradient(shooting.nlp["f"], shooting.nlp["x"])])
+    P = shooting.parameters(0.7, 1.0)
+    rng = np.random.default_rng(0)
+    w, d = rng.standard_normal(shooting.nw), rng.standard_normal(shooting.nw)
+    step = 1e-5  # central difference: truncation O(step²) ~ 1e-10, rounding ~ 1e-16/step ~ 1e-11
+    fd = (float(f(w + step * d, P)) - float(f(w - step * d, P))) / (2 * step)
+    assert float(ca.dot(grad(w, P), d)) == pytest.approx(fd, rel=1e-7)
+
+
+def test_schema_refuses_inconsistent_field_files():
+    data = field_problem()
+    bad = {**data, "process": {**data["process"], "A": [[1.0]]}}
+    with pytest.raises(ConfigError, match="process.A"):
+        ms.Problem.from_dict(bad)
+    point_without_field = ms.Problem.from_dict({**data, "solver": {"method": "direct"}})  # accepted
+    assert point_without_field.solver.method == "direct"
+    with pytest.raises(ConfigError, match="shooting"):
+        ms.Problem.from_dict(field_problem(grid=(4, 4), method="direct"))
+    with pytest.raises(ConfigError, match="constant"):
+        noisy = field_problem()
+        noisy["sensors"][0]["noise"] = {"model": "quadratic_range", "beta": 1.0, "gamma": 1.0}
+        ms.Problem.from_dict(noisy)
+    assert ms.Problem.from_dict(field_problem()).solver.method == "shooting"  # the default for a field
+
+
+def test_terminal_position_and_control_bound_hold():
+    data = field_problem(shooting={"intervals": 20, "coarse_intervals": 10})
+    data["sensors"][0].update(terminal={"p": [3.0, 3.0], "v": [0.0, 0.0]}, u_max=0.8)
+    solution = ms.solve(ms.Problem.from_dict(data))
+    assert solution.success
+    assert np.abs(solution.p[-1, 0] - [3.0, 3.0]).max() < 1e-8  # linear equality constraints, Ipopt tol 1e-10
+    assert np.abs(solution.v[-1, 0]).max() < 1e-8
+    assert np.linalg.norm(solution.u[:, 0], axis=1).max() <= 0.8 * (1 + 1e-6)
+
+
+@pytest.mark.slow
+def test_shooting_agrees_with_the_direct_collocation():
+    # n = 4, N = 1. Collocation (Radau-3) at K = 40 against shooting at K = 200 (its error ~ 1e-10 at the
+    # measured order 4): the gap is the collocation's discretisation error, measured 2.0e-8 relative (K = 20:
+    # 6.5e-7, an observed order 5); both start cold with their default strategies and reach the same optimum.
+    direct = ms.solve(_problem(solver={"method": "direct", "collocation": {"intervals": 40}}))
+    shooting = ms.solve(_problem(solver={"shooting": {"intervals": 200}}))
+    assert direct.success and shooting.success
+    assert shooting.cost == pytest.approx(direct.cost, rel=1e-7)
+    assert np.abs(shooting.p[-1] - direct.p[-1]).max() < 1e-3
+
+
+@pytest.mark.slow
+def test_cost_converges_at_order_four_under_refinement():
+    # one RK4 step per interval at every K (the default substeps change with K and would mix two errors)
+    ref = ms.solve(_problem(solver={"shooting": {"intervals": 320, "substeps": 1}}))
+    costs = []
+    for K in (10, 20, 40):
+        costs.append(ms.solve(_problem(solver={"shooting": {"intervals": K, "substeps": 1}}), init=ref).cost)
+    errors = np.abs(np.array(costs) - ref.cost)
+    orders = np.log2(errors[:-1] / errors[1:])
+    assert orders.min() > 3.5, (costs, orders)  # docs/theory/field.md §3.3: stated order 4
+
+
+@pytest.mark.parametrize(
+    ("grid", "shooting", "message"),
+    [((1000, 1000), {}, "process.field.grid: expected nx·ny <= 2500"),
+     ((50, 50), {"intervals": 2000}, "solver.shooting.intervals: n = 2500 states on K = 2000")],
+)  # fmt: skip
+def test_hostile_sizes_are_refused_before_allocation(tmp_path, capsys, grid, shooting, message):
+    import tracemalloc
+
+    import yaml
+
+    from mobisense import cli
+
+    path = tmp_path / "huge.yaml"
+    path.write_text(yaml.safe_dump(field_problem(grid=grid, shooting=shooting)))
+    tracemalloc.start()
+    code = cli.main(["solve", str(path), "--out", str(tmp_path / "out")])
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and message in err and str(path) in err
+    assert not (tmp_path / "out").exists()
+    assert peak < 50e6  # one dense n × n float matrix would be 8 GB (10⁶ states) or 50 MB (2500)
+
+
+@pytest.mark.slow
+def test_field_mapping_5x5_from_the_command_line(tmp_path, capsys):
+    import json
+
+    from mobisense import cli
+    from mobisense.core.netcdf import open_dataset
+
+    out = tmp_path / "out"
+    assert cli.main(["solve", "field_mapping_5x5", "--out", str(out), "--quiet"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["method"] == "shooting" and summary["status"] == "solved"
+    # research measurement of this problem: J = 0.30428127 (K = 100, m = 2); local optima differ by > 1e-3
+    assert summary["cost"] == pytest.approx(0.30428127, rel=1e-6)
+    assert summary["trace_Sigma_tf"] < 0.5 * summary["baseline"]["trace_Sigma_tf"]
+    ds = open_dataset(out / "solution.nc")
+    assert ds["sigma_diag"].dims == ("time", "state") and ds["sigma_diag"].shape == (101, 25)
+    assert np.allclose(ds["sigma_diag"].values, np.diagonal(ds["Sigma"].values, axis1=1, axis2=2))
+    for figure in ("variance_maps.png", "trace.png", "controls.png", "homotopy.png"):
+        assert (out / figure).stat().st_size > 0
