@@ -20,6 +20,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ...core.interrupts import deferred_interrupts
 from .. import collocation, model, noise_models, path_constraints, state_layout
 from ..collocation import CollocationScheme
 from ..model import SensorKalmanModel, Structure
@@ -288,7 +289,10 @@ class DirectCollocation:
         if warm:
             args.update(lam_x0=lam_w0, lam_g0=lam_g0)
         t0 = time.perf_counter()
-        sol = solver(**args)
+        # Ctrl-C/SIGTERM during Ipopt: CasADi's callback wrapper can swallow the KeyboardInterrupt and the solve
+        # runs on (casadi/casadi#2006); the signal is held and raised once Ipopt returns, so it is never lost
+        with deferred_interrupts():
+            sol = solver(**args)
         elapsed = time.perf_counter() - t0
         stats = solver.stats()
         return NLPResult(
