@@ -4,7 +4,7 @@ The direct method's peak is CasADi's expanded NLP with its Jacobian and Hessian 
 per SX node, measured for n = 1…10 states and N = 1…64 sensors, K = 10…1600 intervals, d = 1…9) plus Ipopt's
 KKT matrices and MUMPS factors (counted per structural non-zero); a continuation builds a second, warm-started
 solver (measured 1.6× the memory of one). Against the peak RSS measured for 20 sizes the estimate is
-0.8–1.6×. The counts come from :func:`mobisense.ocp.direct.transcription.transcription_size`.
+0.8–1.6×. The counts come from :func:`mobisense.ocp.direct.nlp_size.transcription_size`.
 The indirect method's collocation BVP has the same symbolic functions on its own mesh, and a sparse LU
 whose fill stays within each interval's block.
 """
@@ -12,7 +12,7 @@ whose fill stays within each interval's block.
 from __future__ import annotations
 
 from ..core.budget import PROCESS_BYTES, Estimate
-from .direct.transcription import transcription_size
+from .direct.nlp_size import transcription_size
 from .homotopy import fixed_schedule
 from .model import Structure
 from .problem import Problem

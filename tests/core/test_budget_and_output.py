@@ -32,7 +32,8 @@ def test_budget_refuses_with_what_and_how():
 
 
 def test_transcription_size_matches_the_built_nlp():
-    from mobisense.ocp.direct.transcription import transcription_for, transcription_size
+    from mobisense.ocp.direct.nlp_size import transcription_size
+    from mobisense.ocp.direct.transcription import transcription_for
     from mobisense.ocp.model import Structure
     from mobisense.ocp.problem import Problem
 
