@@ -41,7 +41,9 @@ def execute(path: Path, timeout: int = 1200) -> float:
 
 def main(paths: list[str]) -> int:
     """Execute every notebook given; exit status 1 at the first that fails."""
-    os.environ.setdefault("MPLBACKEND", "Agg")
+    # the kernel's inline backend, whatever the caller's MPLBACKEND (CI sets Agg): with Agg, plt.show() draws
+    # nothing and the stored notebook would have no figures
+    os.environ["MPLBACKEND"] = "module://matplotlib_inline.backend_inline"
     for name in paths:
         path = Path(name)
         try:
