@@ -27,9 +27,8 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-__version__ = "0.2.0"
-
 from .core.lazy import lazy_exports  # noqa: E402  (after the environment is set)
+from .core.version import __version__  # noqa: E402
 
 __getattr__, __dir__, _names = lazy_exports(
     __name__,

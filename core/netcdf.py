@@ -24,6 +24,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from .version import __version__
+
 __all__ = ["CONVENTIONS", "recorded_command", "prepare", "open_dataset", "cf_problems", "LABEL_SUFFIX"]
 
 CONVENTIONS = "CF-1.10"
@@ -44,8 +46,6 @@ def recorded_command(argv: Sequence[str]):  # noqa: ANN201  (context manager)
 
 
 def _history() -> str:
-    from .. import __version__
-
     stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
     what = _command[-1] if _command else f"Python API ({Path(sys.argv[0]).name or 'python'})"
     return f"{stamp}: {what} (mobisense {__version__})"
@@ -66,8 +66,6 @@ def prepare(dataset: Any) -> tuple[Any, dict[str, dict[str, Any]]]:
     encoding : dict
         ``to_netcdf`` encoding: no ``_FillValue`` on coordinates, strings as characters.
     """
-    from .. import __version__
-
     ds = dataset.copy()
     for dim in list(ds.dims):
         if dim in ds.coords and ds[dim].dtype.kind in "OUS":
