@@ -87,11 +87,19 @@ def write_json(path: str | Path, data: dict[str, Any]) -> None:
 
 
 def write_netcdf(path: str | Path, dataset: Any) -> None:
-    """Write an ``xarray.Dataset`` as a CF-1.10 netCDF-4 file (h5netcdf), atomically.
+    """Write an ``xarray.Dataset`` or a :class:`~mobisense.core.netcdf_writer.DatasetContent` as CF-1.10 netCDF-4.
 
-    The global attributes, encoding and string labels are those of :func:`mobisense.core.netcdf.prepare`;
-    :func:`mobisense.core.netcdf.open_dataset` reads the file back as the dataset it was.
+    The file is written atomically, through h5netcdf. The global attributes, encoding and string labels are
+    those of :func:`mobisense.core.netcdf.prepare`; :func:`mobisense.core.netcdf.open_dataset` reads the file
+    back as the dataset it was. A ``DatasetContent`` is written without importing xarray
+    (:func:`mobisense.core.netcdf_writer.write_content`), to the same file as its ``to_xarray()``.
     """
+    from .netcdf_writer import DatasetContent, write_content
+
+    if isinstance(dataset, DatasetContent):
+        with atomic_path(path) as tmp:
+            write_content(tmp, dataset)
+        return
     from .netcdf import prepare
 
     prepared, encoding = prepare(dataset)

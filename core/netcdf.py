@@ -26,7 +26,16 @@ from typing import Any
 
 from .version import __version__
 
-__all__ = ["CONVENTIONS", "recorded_command", "prepare", "open_dataset", "cf_problems", "LABEL_SUFFIX"]
+__all__ = [
+    "CONVENTIONS",
+    "LABEL_SUFFIX",
+    "recorded_command",
+    "global_attributes",
+    "label_coordinate",
+    "prepare",
+    "open_dataset",
+    "cf_problems",
+]
 
 CONVENTIONS = "CF-1.10"
 #: suffix of the auxiliary coordinate that carries the string labels of a dimension in the file
@@ -51,6 +60,21 @@ def _history() -> str:
     return f"{stamp}: {what} (mobisense {__version__})"
 
 
+def global_attributes(attrs: dict[str, Any]) -> dict[str, Any]:
+    """The global attributes as written: ``Conventions``, ``title``, ``history`` (appended to), ``source``, the rest."""
+    title = attrs.get("title") or "mobisense output"
+    previous = attrs.get("history")
+    history = _history() if not previous else f"{previous}\n{_history()}"
+    fixed = {"Conventions": CONVENTIONS, "title": title, "history": history, "source": f"mobisense {__version__}"}
+    return {**fixed, **{k: v for k, v in attrs.items() if k not in fixed}}
+
+
+def label_coordinate(dim: str, labels: Any, attrs: dict[str, Any]) -> tuple[str, Any]:
+    """The auxiliary coordinate ``(name, (dims, values, attrs))`` that carries the string labels of ``dim``."""
+    label_attrs = {"long_name": attrs.get("long_name", f"name of each {dim}")}
+    return f"{dim}{LABEL_SUFFIX}", ((dim,), labels.astype(str), label_attrs)
+
+
 def prepare(dataset: Any) -> tuple[Any, dict[str, dict[str, Any]]]:
     """The dataset as written, and its encoding (see the module notes).
 
@@ -69,15 +93,9 @@ def prepare(dataset: Any) -> tuple[Any, dict[str, dict[str, Any]]]:
     ds = dataset.copy()
     for dim in list(ds.dims):
         if dim in ds.coords and ds[dim].dtype.kind in "OUS":
-            labels = ds[dim]
-            label_attrs = {"long_name": labels.attrs.get("long_name", f"name of each {dim}")}
-            label = ((dim,), labels.values.astype(str), label_attrs)
-            ds = ds.drop_vars(dim).assign_coords({f"{dim}{LABEL_SUFFIX}": label})
-    title = ds.attrs.get("title") or "mobisense output"
-    previous = ds.attrs.get("history")
-    history = _history() if not previous else f"{previous}\n{_history()}"
-    attrs = {"Conventions": CONVENTIONS, "title": title, "history": history, "source": f"mobisense {__version__}"}
-    ds.attrs = {**attrs, **{k: v for k, v in ds.attrs.items() if k not in attrs}}
+            name, label = label_coordinate(str(dim), ds[dim].values, ds[dim].attrs)
+            ds = ds.drop_vars(dim).assign_coords({name: label})
+    ds.attrs = global_attributes(ds.attrs)
     encoding: dict[str, dict[str, Any]] = {}
     for name, variable in ds.variables.items():
         entry: dict[str, Any] = {}

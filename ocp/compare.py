@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from ..core.netcdf_writer import DatasetContent
 from .direct.solver import solve_direct
 from .indirect.bvp_solvers import BVPSolution
 from .indirect.hamiltonian import hamiltonian_system
@@ -100,12 +101,12 @@ class ComparedSolution(Solution):
 
     indirect: Solution | None = None
 
-    def to_dataset(self) -> Any:
-        """The direct dataset plus ``indirect_*`` variables on their own ``time_indirect`` axis."""
-        ds = super().to_dataset()
+    def to_content(self) -> DatasetContent:
+        """The direct solution's content plus ``indirect_*`` variables on their own ``time_indirect`` axis."""
+        content = super().to_content()
         other = self.indirect
         if other is None:
-            return ds
+            return content
         dims = {
             "Sigma": ("time_indirect", "row", "col"),
             "p": ("time_indirect", "sensor", "xy"),
@@ -117,10 +118,11 @@ class ComparedSolution(Solution):
         }
         from .solution_dataset import variable_attrs
 
-        ds = ds.assign_coords(time_indirect=("time_indirect", other.t, variable_attrs(self, "time_indirect")))
+        content.add_coord("time_indirect", ("time_indirect",), other.t, variable_attrs(self, "time_indirect"))
         for name, dim in dims.items():
-            ds[f"indirect_{name}"] = (dim, getattr(other, name), variable_attrs(self, name, " (indirect solution)"))
-        return ds
+            attrs = variable_attrs(self, name, " (indirect solution)")
+            content.add_variable(f"indirect_{name}", dim, getattr(other, name), attrs)
+        return content
 
 
 def _bvp_block(bvp: BVPSolution, solver: str, time_s: float) -> dict[str, Any]:

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..core.errors import ConfigError
 from ..core.files import to_jsonable, write_json, write_netcdf
+from ..core.netcdf_writer import DatasetContent
 from .problem import Problem
 from .solution_file import brief_error, open_solution_file, read_solution_problem
 from .state_layout import StateLayout
@@ -303,11 +304,15 @@ class Solution:
         return to_jsonable(out)
 
     # ------------------------------------------------------------------ persistence
+    def to_content(self) -> DatasetContent:
+        """What ``solution.nc`` holds, as numpy arrays (see :mod:`mobisense.ocp.solution_dataset`; no xarray)."""
+        from .solution_dataset import solution_content
+
+        return solution_content(self)
+
     def to_dataset(self) -> Any:
         """Return the solution as an ``xarray.Dataset`` (see :mod:`mobisense.ocp.solution_dataset`)."""
-        from .solution_dataset import solution_dataset
-
-        return solution_dataset(self)
+        return self.to_content().to_xarray()
 
     def to_xarray(self) -> Any:
         """The solution as an ``xarray.Dataset`` (what :meth:`save` writes as ``solution.nc``)."""
@@ -394,7 +399,7 @@ class Solution:
     def save(self, folder: str | Path) -> None:
         """Write ``solution.nc`` and ``summary.json`` into ``folder`` (atomically)."""
         folder = Path(folder)
-        write_netcdf(folder / "solution.nc", self.to_dataset())
+        write_netcdf(folder / "solution.nc", self.to_content())  # without importing xarray
         write_json(folder / "summary.json", self.summary())
 
     @classmethod

@@ -17,9 +17,10 @@ import numpy as np
 import yaml
 
 from ..core.files import to_jsonable
+from ..core.netcdf_writer import DatasetContent
 from ..core.reader import parse_document
 
-__all__ = ["VARIABLES", "COORDINATES", "solution_dataset", "solution_fields", "variable_attrs"]
+__all__ = ["VARIABLES", "COORDINATES", "solution_content", "solution_dataset", "solution_fields", "variable_attrs"]
 
 #: variable -> (long_name, powers of the base units in its unit)
 VARIABLES: dict[str, tuple[str, dict[str, int]]] = {
@@ -66,37 +67,41 @@ def variable_attrs(solution: Any, name: str, suffix: str = "") -> dict[str, str]
 
 def solution_dataset(solution: Any) -> Any:
     """The solution as an ``xarray.Dataset`` (what ``solution.nc`` holds, see the module notes)."""
-    import xarray as xr
+    return solution_content(solution).to_xarray()
 
+
+def solution_content(solution: Any) -> DatasetContent:
+    """What ``solution.nc`` holds, as numpy arrays (written without xarray, see the module notes)."""
     s, n = solution, solution.problem.n
     sensor, cov = ("time", "sensor", "xy"), ("time", "row", "col")
     arrays: dict[str, tuple[tuple[str, ...], Any]] = {
         "Sigma": (cov, s.Sigma), "p": (sensor, s.p), "v": (sensor, s.v), "u": (("time_u", "sensor", "xy"), s.u),
     }  # fmt: skip
-    coords: dict[str, Any] = {
-        "time": s.t, "time_u": s.t_u, "sensor": [x.name for x in s.problem.sensors], "xy": ["x", "y"],
-        "row": np.arange(n), "col": np.arange(n),
+    coords: dict[str, tuple[tuple[str, ...], Any]] = {
+        "time": (("time",), s.t), "time_u": (("time_u",), s.t_u),
+        "sensor": (("sensor",), [x.name for x in s.problem.sensors]), "xy": (("xy",), ["x", "y"]),
+        "row": (("row",), np.arange(n)), "col": (("col",), np.arange(n)),
     }  # fmt: skip
     if s.problem.process.field is not None:
         locations = s.problem.process.field.process().locations
-        coords.update(state=np.arange(n), state_x=("state", locations[:, 0]), state_y=("state", locations[:, 1]))
+        coords.update(state=(("state",), np.arange(n)), state_x=(("state",), locations[:, 0]),
+                      state_y=(("state",), locations[:, 1]))  # fmt: skip
         arrays["sigma_diag"] = (("time", "state"), np.diagonal(s.Sigma, axis1=1, axis2=2))
         if not s.stats.get("full_sigma", True):  # solver.shooting.full_sigma (default: n <= 25)
             del arrays["Sigma"], coords["row"], coords["col"]
     if s.Lam is not None:
-        coords["time_costate"] = s.t_costate
+        coords["time_costate"] = (("time_costate",), s.t_costate)
         arrays["Lam"] = (("time_costate", "row", "col"), s.Lam)
         arrays["lam_p"] = (("time_costate", "sensor", "xy"), s.lam_p)
         arrays["lam_v"] = (("time_costate", "sensor", "xy"), s.lam_v)
     if s.path_eps is not None:
-        coords["step"] = np.arange(len(s.path_eps))
+        coords["step"] = (("step",), np.arange(len(s.path_eps)))
         arrays["path_eps"] = (("step",), s.path_eps)
         arrays["path_p"] = (("step", "time", "sensor", "xy"), s.path_p)
         arrays["path_Sigma"] = (("step", "time", "row", "col"), s.path_Sigma)
     if s.nlp is not None:
         for key, dim in _NLP_DIMS.items():
             arrays[f"nlp_{key}"] = ((dim,), np.asarray(s.nlp[key]))
-    data = {name: (dims, values, variable_attrs(s, name)) for name, (dims, values) in arrays.items()}
     attrs = {
         "title": f"mobisense: solution of problem '{s.problem.name}' by the {s.method} method",
         "comment": "Sigma and Lam are full symmetric matrices; costates are those of J (minimisation, H = L + λ'f)",
@@ -111,10 +116,12 @@ def solution_dataset(solution: Any) -> Any:
         "collocation_json": json.dumps(s.collocation),
         "terminal_cost": s.terminal_cost, "running_cost": s.running_cost, "control_energy": s.control_energy,
     }  # fmt: skip
-    ds = xr.Dataset(data, coords=coords, attrs=attrs)
-    for name in ds.coords:
-        ds[name].attrs.update(variable_attrs(s, str(name)))
-    return ds
+    content = DatasetContent(attrs=attrs)
+    for name, (dims, values) in arrays.items():
+        content.add_variable(name, dims, values, variable_attrs(s, name))
+    for name, (dims, values) in coords.items():
+        content.add_coord(name, dims, values, variable_attrs(s, name))
+    return content
 
 
 def solution_fields(ds: Any) -> dict[str, Any]:

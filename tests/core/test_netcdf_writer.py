@@ -1,0 +1,152 @@
+"""The xarray-free netCDF writer writes the file xarray writes: same Dataset read back, same HDF5 layout.
+
+Each case writes one :class:`DatasetContent` twice — through xarray (``write_netcdf(path,
+content.to_xarray())``, the writer every other file uses) and through h5netcdf alone
+(``write_netcdf(path, content)``) — and compares the two files read back with ``xarray.open_dataset``
+(``assert_identical``: variables, dimensions, coordinates, dtypes, every attribute) and, below xarray, every
+HDF5 dataset's shape, dtype, fill value and attributes (except the object references of the dimension
+scales, which differ by address only). ``history`` holds the clock time, so it is fixed for the comparison.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import xarray as xr
+
+from mobisense.core import netcdf
+from mobisense.core.files import write_netcdf
+from mobisense.core.netcdf import open_dataset
+from mobisense.core.netcdf_writer import DatasetContent, write_content
+
+REFERENCES = ("DIMENSION_LIST", "REFERENCE_LIST")
+
+
+def _layout(path: Path) -> dict[str, object]:
+    """Every HDF5 object's shape, dtype, fill value and attributes (as text), and the global attributes."""
+    out: dict[str, object] = {}
+    with h5py.File(path) as f:
+        out["/"] = {k: (repr(v), str(f.attrs.get_id(k).dtype)) for k, v in f.attrs.items()}
+
+        def visit(name: str, obj: h5py.Dataset) -> None:
+            attrs = {k: (repr(v), str(obj.attrs.get_id(k).dtype)) for k, v in obj.attrs.items() if k not in REFERENCES}
+            refs = {k: len(obj.attrs[k]) for k in REFERENCES if k in obj.attrs}
+            out[name] = (obj.shape, str(obj.dtype), repr(obj.fillvalue), obj.chunks, attrs, refs)
+
+        f.visititems(visit)
+    return out
+
+
+def assert_same_file(content: DatasetContent, folder: Path, monkeypatch: pytest.MonkeyPatch) -> xr.Dataset:
+    """Write ``content`` both ways; assert the files are the same; return the dataset read back."""
+    monkeypatch.setattr(netcdf, "_history", lambda: "2026-01-01T00:00:00Z: test (mobisense)")
+    by_xarray, by_h5netcdf = folder / "xarray.nc", folder / "h5netcdf.nc"
+    write_netcdf(by_xarray, content.to_xarray())
+    write_netcdf(by_h5netcdf, content)
+    with xr.open_dataset(by_xarray, engine="h5netcdf") as a, xr.open_dataset(by_h5netcdf, engine="h5netcdf") as b:
+        xr.testing.assert_identical(a, b)
+        for name in a.variables:
+            assert a[name].dtype == b[name].dtype, name
+            assert a[name].encoding.get("_FillValue", "none") is b[name].encoding.get("_FillValue", "none") or (
+                np.isnan(a[name].encoding["_FillValue"]) and np.isnan(b[name].encoding["_FillValue"])
+            ), name
+        assert list(a.variables) == list(b.variables)
+        loaded = b.load()
+    assert _layout(by_xarray) == _layout(by_h5netcdf)
+    return loaded
+
+
+def _synthetic() -> DatasetContent:
+    """Float64/float32/int data, integer and string index coordinates (non-ASCII labels), auxiliary coords."""
+    rng = np.random.default_rng(3)
+    content = DatasetContent(attrs={"title": "synthetic", "eps": 0.5, "count": 3, "note": "Σ ≥ 0", "v": [1.0, 2.0]})
+    content.add_coord("time", ("time",), np.linspace(0.0, 1.0, 5), {"long_name": "time", "units": "s"})
+    content.add_coord("sensor", ("sensor",), ["Σ1", "s-two"], {"long_name": "sensor name", "units": "1"})
+    content.add_coord("xy", ("xy",), ["x", "y"], {})  # a label without long_name gets a generic one
+    content.add_coord("cell", ("cell",), np.arange(3), {"long_name": "cell", "units": "1"})
+    content.add_coord("cell_x", ("cell",), [0.5, 1.5, 2.5], {"long_name": "x of the cell", "units": "m"})
+    content.add_coord("time_other", ("time_other",), [0.0, 2.0], {"long_name": "another time", "units": "s"})
+    content.add_coord("orphan", ("orphan_dim",), [1.0, 2.0], {"long_name": "on no variable", "units": "1"})
+    content.add_variable("p", ("time", "sensor", "xy"), rng.normal(size=(5, 2, 2)), {"long_name": "p", "units": "m"})
+    content.add_variable("f32", ("time", "cell"), rng.normal(size=(5, 3)).astype(np.float32), {"units": "1"})
+    content.add_variable("count_per_cell", ("cell",), np.array([1, 2, 3]), {"long_name": "n", "units": "1"})
+    content.add_variable("free", ("free_dim",), np.array([np.nan, 1.0]), {"long_name": "no coordinate", "units": "1"})
+    content.add_variable("scalar", (), np.float64(2.5), {"long_name": "a scalar", "units": "1"})
+    return content
+
+
+def test_synthetic_content_is_written_as_xarray_writes_it(tmp_path, monkeypatch):
+    ds = assert_same_file(_synthetic(), tmp_path, monkeypatch)
+    assert ds.attrs["Conventions"] == "CF-1.10" and ds.attrs["title"] == "synthetic"
+    assert "orphan" in ds.coords and "coordinates" not in ds.attrs  # read from the global "coordinates"
+    with h5py.File(tmp_path / "h5netcdf.nc") as f:
+        assert f.attrs["coordinates"] == "orphan"  # as xarray, a coordinate of no variable is named globally
+    assert ds["p"].encoding["coordinates"] == "sensor_label xy_label"
+    assert list(ds["sensor_label"].values) == ["Σ1", "s-two"]
+    assert ds["xy_label"].attrs["long_name"] == "name of each xy"
+    with pytest.raises(KeyError):
+        ds["time"].encoding["_FillValue"]  # no fill value on coordinates (CF §2.5.1)
+
+
+def test_labels_read_back_as_index_coordinates(tmp_path):
+    write_netcdf(tmp_path / "a.nc", _synthetic())
+    ds = open_dataset(tmp_path / "a.nc")
+    assert list(ds["sensor"].values) == ["Σ1", "s-two"]
+    np.testing.assert_array_equal(ds["p"].sel(sensor="Σ1").values, _synthetic().data_vars["p"][1][:, 0])
+
+
+def test_what_the_writer_does_not_support_is_a_clear_error(tmp_path):
+    strings = DatasetContent()
+    strings.add_variable("names", ("k",), ["a", "b"], {})
+    with pytest.raises(TypeError, match="data variable 'names': values of type <U1"):
+        write_content(tmp_path / "a.nc", strings)
+    sizes = DatasetContent()
+    sizes.add_variable("a", ("k",), [1.0, 2.0], {})
+    sizes.add_variable("b", ("k",), [1.0, 2.0, 3.0], {})
+    with pytest.raises(ValueError, match="dimension 'k': sizes 2 and 3 conflict"):
+        write_content(tmp_path / "b.nc", sizes)
+    shape = DatasetContent()
+    shape.add_variable("a", ("k",), np.zeros((2, 2)), {})
+    with pytest.raises(ValueError, match="2-dimensional values for dimensions"):
+        write_content(tmp_path / "c.nc", shape)
+
+
+def test_writing_a_content_imports_neither_xarray_nor_pandas(tmp_path):
+    code = (
+        "import sys, numpy as np\n"
+        "from mobisense.core.files import write_netcdf\n"
+        "from mobisense.core.netcdf_writer import DatasetContent\n"
+        "c = DatasetContent(attrs={'title': 't'})\n"
+        "c.add_coord('sensor', ('sensor',), ['a'], {'long_name': 'name'})\n"
+        "c.add_variable('p', ('sensor',), [1.0], {'long_name': 'p', 'units': 'm'})\n"
+        f"write_netcdf({str(tmp_path / 'a.nc')!r}, c)\n"
+        "print(sorted(m for m in ('xarray', 'pandas', 'dask', 'distributed', 'pyarrow') if m in sys.modules))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["direct", "indirect", "both"])
+def test_a_solution_file_is_the_file_xarray_writes(method, tmp_path, monkeypatch):
+    import short_runs
+
+    solution = short_runs.small_solution(method)
+    ds = assert_same_file(solution.to_content(), tmp_path, monkeypatch)
+    assert ("indirect_p" in ds) == (method == "both")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("full_sigma", [True, False])
+def test_a_field_solution_file_is_the_file_xarray_writes(full_sigma, tmp_path, monkeypatch):
+    import short_runs
+
+    solution = short_runs.field_solution(shooting={"full_sigma": full_sigma})
+    ds = assert_same_file(solution.to_content(), tmp_path, monkeypatch)
+    assert ds["sigma_diag"].encoding["coordinates"] == "state_x state_y"
+    assert ("Sigma" in ds) == full_sigma
