@@ -53,8 +53,15 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {one_line(message, 400)} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with every sub-command."""
+def build_parser(commands: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The argument parser with every sub-command.
+
+    Parameters
+    ----------
+    commands : sequence of str, optional
+        The sub-commands whose arguments are added (default: all). The others get only their help line: the
+        command line adds the arguments of the one command it runs (its options import what they list).
+    """
     parser = _Parser(prog="mobisense", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"mobisense {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
@@ -62,7 +69,8 @@ def build_parser() -> argparse.ArgumentParser:
         command = _command(name)
         help_line = (command.__doc__ or "").strip().splitlines()[0]
         command_parser = sub.add_parser(name, help=help_line, description=help_line)
-        command.add_arguments(command_parser)
+        if commands is None or name in commands:
+            command.add_arguments(command_parser)
         command_parser.set_defaults(run=command.run)
     return parser
 
@@ -90,7 +98,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _main(argv: Sequence[str] | None, said: list[str]) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser()
+    parser = build_parser([a for a in argv if not a.startswith("-")][:1])  # the command: the first word
     try:
         args = parser.parse_args(argv)
     except SystemExit as exit_:  # --help, --version, usage errors: argparse has printed what to say

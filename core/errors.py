@@ -15,11 +15,10 @@ from __future__ import annotations
 
 import math
 import reprlib
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
-
-import numpy as np
 
 __all__ = ["ConfigError", "ComputationError", "OutputError", "brief", "one_line", "numerical_failures"]
 
@@ -56,7 +55,8 @@ def brief(value: Any, limit: int = VALUE_CHARS) -> str:
     """
     if isinstance(value, float):
         text = repr(value) if math.isfinite(value) else str(value)
-    elif isinstance(value, np.ndarray):
+    elif _is_array(value):
+        np = sys.modules["numpy"]
         text = f"array of shape {value.shape}" if value.size > 6 else np.array2string(value.ravel(), threshold=6)
     else:
         try:
@@ -64,6 +64,12 @@ def brief(value: Any, limit: int = VALUE_CHARS) -> str:
         except Exception:  # noqa: BLE001  (a value whose repr fails must not hide the error being reported)
             text = f"<{type(value).__name__}>"
     return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
+def _is_array(value: Any) -> bool:
+    """Whether ``value`` is a numpy array, without importing numpy (``--help`` and ``validate`` need none)."""
+    np = sys.modules.get("numpy")
+    return np is not None and isinstance(value, np.ndarray)
 
 
 def one_line(text: str, limit: int = 300) -> str:
@@ -101,5 +107,5 @@ def numerical_failures(what: str) -> Iterator[None]:
         yield
     except (ConfigError, ComputationError, OutputError):
         raise
-    except (ArithmeticError, np.linalg.LinAlgError, RuntimeError, MemoryError, ValueError) as exc:
+    except (ArithmeticError, RuntimeError, MemoryError, ValueError) as exc:  # numpy's LinAlgError is a ValueError
         raise ComputationError(f"{what}: {_describe(exc)}") from exc

@@ -108,12 +108,18 @@ def write_netcdf(path: str | Path, dataset: Any) -> None:
 
 
 def write_figure(path: str | Path, draw: Callable[[], Any]) -> None:
-    """Call ``draw()`` (returning a matplotlib Figure), save it atomically and close it."""
+    """Call ``draw()`` (returning a matplotlib Figure), save it atomically and close it.
+
+    A figure with constrained layout (``layout="constrained"``) is saved at its own size, drawn once; any
+    other is cropped to its contents (``bbox_inches="tight"``, which draws it twice).
+    """
     import matplotlib.pyplot as plt
+    from matplotlib.layout_engine import ConstrainedLayoutEngine
 
     fig = draw()
     try:
+        tight = None if isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine) else "tight"
         with atomic_path(path) as tmp:
-            fig.savefig(tmp, format=Path(path).suffix.lstrip(".") or "png", dpi=130, bbox_inches="tight")
+            fig.savefig(tmp, format=Path(path).suffix.lstrip(".") or "png", dpi=130, bbox_inches=tight)
     finally:
         plt.close(fig)

@@ -46,7 +46,16 @@ class SolveCommand:
             default=None,
             help="override solver.strategy (direct method: which starts to solve, docs/theory/direct.md §5.6)",
         )
-        parser.add_argument("--no-plot", action="store_true", help="skip the figures")
+        figures = parser.add_mutually_exclusive_group()
+        figures.add_argument("--no-plot", action="store_true", help="skip the figures")
+        figures.add_argument(
+            "--plot",
+            type=_names,
+            default=None,
+            metavar="NAMES",
+            help="write only these figures, a comma list of paths, covariance, controls, homotopy, continuation "
+            "(field problems: variance_maps, trace, controls, homotopy); default: all",
+        )
         parser.add_argument(
             "--sensitivities",
             action="store_true",
@@ -85,6 +94,13 @@ class SolveCommand:
         cluster = Cluster.from_args(args)
         if args.multistart is None and (cluster.scheduler or cluster.workers):
             raise ConfigError(f"{source}: --workers/--scheduler: only used with --multistart")
+        if args.plot is not None:
+            from .plots import figure_names
+
+            known = figure_names(problem.process.field is not None)
+            unknown = ", ".join(name for name in args.plot if name not in known)
+            if unknown:
+                raise ConfigError(f"{source}: --plot: no figure {unknown}; expected some of {', '.join(known)}")
         if args.sensitivities and problem.solver.method != "direct":
             raise ConfigError(f"{source}: --sensitivities: expected solver.method 'direct'")
         if args.multistart is not None:
@@ -121,7 +137,7 @@ class SolveCommand:
                 from .plots import save_figures
 
                 with numerical_failures(f"plotting {source}"):
-                    save_figures(solution, out)
+                    save_figures(solution, out, args.plot)
             reporter.report(solution, out)
         if not solution.success:
             print(f"mobisense: solver failure: {solution.message}", file=sys.stderr)
@@ -130,6 +146,14 @@ class SolveCommand:
         if warning:
             print(f"mobisense: warning: {warning}", file=sys.stderr)
         return 0
+
+
+def _names(text: str) -> list[str]:
+    """``a,b, c`` -> ``["a", "b", "c"]`` (argparse type of ``--plot``)."""
+    names = [name.strip().removesuffix(".png") for name in text.split(",") if name.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError("expected a comma list of figure names")
+    return names
 
 
 def _local_workers(requested: int | None) -> int:

@@ -17,12 +17,11 @@ from __future__ import annotations
 
 import functools
 import math
+import sys
 from dataclasses import dataclass, field
 from typing import Annotated, Any, Literal
 
-import casadi as ca
 import numpy as np
-import scipy.linalg
 from pydantic import Field, model_validator
 
 from ..core.config import InvalidValue, PositiveFloat, StrictModel
@@ -74,7 +73,8 @@ class FieldKernel(StrictModel):
 
     def of_distance(self, r: Any) -> Any:
         """K at distance ``r`` (L): numpy array or CasADi expression, the same type back (state²)."""
-        lib = ca if isinstance(r, (ca.SX, ca.MX, ca.DM)) else np
+        ca = sys.modules.get("casadi")  # a CasADi expression implies CasADi is loaded (validating needs none)
+        lib = ca if ca is not None and isinstance(r, (ca.SX, ca.MX, ca.DM)) else np
         ell, var = self.length_scale, self.variance
         if self.type == "matern32":
             a = np.sqrt(3.0) * r / ell
@@ -207,6 +207,8 @@ class FieldProcess:
             jitter *= 10.0
         self.jitter_used, self.Ks = jitter, Ks
         self.chol = np.linalg.cholesky(Ks)
+        import scipy.linalg  # here, not at import: validating a problem file needs no scipy
+
         inv = scipy.linalg.cho_solve((self.chol, True), np.eye(self.n))
         self.Ks_inv = 0.5 * (inv + inv.T)
 
@@ -232,6 +234,8 @@ class FieldProcess:
 
     def symbolic_cross_covariance(self, px: Any, py: Any, loc: Any) -> Any:
         """k(p_i, s_j) as a CasADi (n, N) matrix for position rows px, py (1, N) and locations ``loc`` (n, 2)."""
+        import casadi as ca
+
         n = loc.size1() if hasattr(loc, "size1") else len(loc)
         ones = ca.DM.ones(n, 1)
         dx = ca.repmat(loc[:, 0], 1, px.size2()) - ca.mtimes(ones, px)
@@ -241,6 +245,8 @@ class FieldProcess:
 
     def symbolic_weights(self, p: Any, Ks_inv: Any, loc: Any) -> Any:
         """The kriging column c(p) = Kₛ⁻¹ k(p) (n, 1) for a symbolic position ``p`` (2, 1)."""
+        import casadi as ca
+
         return ca.mtimes(Ks_inv, self.symbolic_cross_covariance(p[0], p[1], loc))
 
     def to_grid(self, values: np.ndarray) -> np.ndarray:

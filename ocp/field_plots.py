@@ -34,7 +34,7 @@ def plot_variance_maps(solution: Solution):  # noqa: ANN201  (matplotlib Figure)
     if "sigma_diag_tf" in solution.baseline:
         panels.append((f"t = {t[-1]:g}: no control", np.asarray(solution.baseline["sigma_diag_tf"]), False))
     vmax = float(diag.max())
-    fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 4.4), constrained_layout=True, squeeze=False)
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 4.4), layout="constrained", squeeze=False)
     length, variance = _label(solution, length=1), _label(solution, state=2)
     for ax, (title, values, paths) in zip(axes[0], panels, strict=True):
         mesh = ax.pcolormesh(xe, ye, field.to_grid(values), vmin=0.0, vmax=vmax, cmap="viridis", shading="flat")
@@ -55,7 +55,7 @@ def plot_trace(solution: Solution):  # noqa: ANN201
     """Tr Σ(t) of the optimum and of the no-control baseline."""
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    fig, ax = plt.subplots(figsize=(6.4, 4.0), layout="constrained")
     if "trace_Sigma" in solution.baseline:
         ax.plot(solution.t, solution.baseline["trace_Sigma"], "--", color="0.35", label="no control (u ≡ 0)")
     ax.plot(solution.t, np.trace(solution.Sigma, axis1=1, axis2=2), lw=2, label="optimal paths")

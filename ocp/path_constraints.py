@@ -17,9 +17,9 @@ check the re-simulated path between the nodes (:mod:`mobisense.ocp.path_report`)
 
 from __future__ import annotations
 
+import sys
 from typing import Any
 
-import casadi as ca
 import numpy as np
 from pydantic import Field, model_validator
 
@@ -170,6 +170,8 @@ def path_parameter_values(constraints: PathConstraints | None, n_sensors: int) -
 # ---------------------------------------------------------------------- the rows
 def _smooth_max(values: list[Any], s: Any) -> Any:
     """Nested ``smax(a, b) = (a + b)/2 + √(((a − b)/2)² + s²)``: max ≤ smax ≤ max + (m − 1) s (eq. path.2)."""
+    import casadi as ca  # here, not at import: validating a problem file needs no CasADi
+
     out = values[0]
     for v in values[1:]:
         out = 0.5 * (out + v) + ca.sqrt((0.5 * (out - v)) ** 2 + s**2)
@@ -178,21 +180,21 @@ def _smooth_max(values: list[Any], s: Any) -> Any:
 
 def _polygon_edges(V: Any, m: int, orientation: int) -> list[tuple[Any, Any]]:
     """(vertex, outward unit normal) of each edge of a convex polygon (SX or numpy rows)."""
+    ca = sys.modules.get("casadi")  # SX rows imply CasADi is loaded
+    symbolic = ca is not None and isinstance(V, ca.SX)
     edges = []
     for j in range(m):
         a, b = V[j, :], V[(j + 1) % m, :]
         e = b - a
-        length = ca.sqrt(e[0] ** 2 + e[1] ** 2) if isinstance(V, ca.SX) else float(np.hypot(*e))
-        normal = (
-            orientation * ca.horzcat(e[1], -e[0]) / length
-            if isinstance(V, ca.SX)
-            else orientation * np.array([e[1], -e[0]]) / length
-        )
+        length = ca.sqrt(e[0] ** 2 + e[1] ** 2) if symbolic else float(np.hypot(*e))
+        normal = orientation * (ca.horzcat(e[1], -e[0]) if symbolic else np.array([e[1], -e[0]])) / length
         edges.append((a, normal))
     return edges
 
 
 def _polygon_area(V: Any, m: int) -> Any:
+    import casadi as ca
+
     return 0.5 * ca.fabs(sum(V[j, 0] * V[(j + 1) % m, 1] - V[(j + 1) % m, 0] * V[j, 1] for j in range(m)))
 
 
@@ -216,6 +218,8 @@ def path_rows(
     scales : list of SX scalars
     labels : list of (group, description)
     """
+    import casadi as ca
+
     L, V = b["length_scale"], b["velocity_scale"]
     N = len(positions)
     rows: list[Any] = []

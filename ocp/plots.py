@@ -7,7 +7,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -26,6 +28,8 @@ __all__ = [
     "plot_controls",
     "plot_homotopy",
     "plot_continuation",
+    "figures_of",
+    "figure_names",
     "save_figures",
 ]
 
@@ -62,7 +66,7 @@ def plot_paths(solution: Solution):  # noqa: ANN201  (matplotlib Figure)
     ys = np.linspace(lo[1] - pad, hi[1] + pad, 160)
     X, Y = np.meshgrid(xs, ys)
     R = effective_noise(solution, 0, np.column_stack([X.ravel(), Y.ravel()])).reshape(X.shape)
-    fig, ax = plt.subplots(figsize=(6.8, 6.4))
+    fig, ax = plt.subplots(figsize=(6.8, 6.4), layout="constrained")
     cs = ax.contourf(X, Y, np.log10(R), levels=20, cmap="Blues_r", alpha=0.8)
     fig.colorbar(cs, ax=ax, label=f"log10 of the noise variance of sensor {problem.sensors[0].name}")
     # the process locations go under everything, so that a sensor ending on one stays visible
@@ -109,7 +113,8 @@ def plot_covariance(solution: Solution):  # noqa: ANN201
     time, variance = _label(solution, time=1), _label(solution, state=2)
     baseline = coasting_covariance(solution)
     feasible = solution.baseline_feasible
-    fig, axes = plt.subplots(1, 2 if n > 1 else 1, figsize=(11, 4.2) if n > 1 else (6.4, 4.2), squeeze=False)
+    size = (11, 4.2) if n > 1 else (6.4, 4.2)
+    fig, axes = plt.subplots(1, 2 if n > 1 else 1, figsize=size, squeeze=False, layout="constrained")
     ax1 = axes[0, 0]
     ax1.semilogy(solution.t, np.trace(baseline, axis1=1, axis2=2), "--", color="0.35", lw=1.6,
                  label="no control (u ≡ 0)" + ("" if feasible else ", violates the terminal constraints"))  # fmt: skip
@@ -128,7 +133,6 @@ def plot_covariance(solution: Solution):  # noqa: ANN201
         ax2.set_ylabel(f"entry of Σ(t) ({variance})")
         ax2.set_title("entries of Σ(t), optimal")
         ax2.legend(fontsize=8, ncol=max(1, n // 2))
-    fig.tight_layout()
     return fig
 
 
@@ -136,7 +140,7 @@ def plot_controls(solution: Solution):  # noqa: ANN201
     """Control components and norm of each sensor vs time."""
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    fig, ax = plt.subplots(figsize=(7.5, 4.2), layout="constrained")
     for i, sensor in enumerate(solution.problem.sensors):
         line = ax.plot(solution.t_u, np.linalg.norm(solution.u[:, i], axis=1), lw=2, label=f"|u| {sensor.name}")[0]
         ax.plot(solution.t_u, solution.u[:, i, 0], ":", color=line.get_color(), label=f"u_x {sensor.name}")
@@ -155,7 +159,7 @@ def plot_homotopy(solution: Solution):  # noqa: ANN201
     import matplotlib.pyplot as plt
 
     steps = solution.homotopy
-    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    fig, ax = plt.subplots(figsize=(6.4, 4.0), layout="constrained")
     ok = [s for s in steps if s.success]
     bad = [s for s in steps if not s.success]
     iterations = "Newton iterations (BVP)" if solution.method == "indirect" else "Ipopt iterations"
@@ -187,7 +191,7 @@ def plot_continuation(solution: Solution):  # noqa: ANN201
     eps, trace = np.asarray(curve.get("eps", []), float), np.asarray(curve.get("trace_sigma_tf", []), float)
     if eps.size < 2:
         return None
-    fig, ax = plt.subplots(figsize=(6.8, 4.4))
+    fig, ax = plt.subplots(figsize=(6.8, 4.4), layout="constrained")
     ax.plot(eps, trace, "-", color="tab:blue", lw=1.4, label="solution curve (arclength steps)")
     ax.plot(eps, trace, ".", color="tab:blue", ms=4)
     turns = np.flatnonzero(np.diff(np.sign(np.diff(eps))) != 0) + 1
@@ -213,19 +217,38 @@ FIGURES = {
 }
 
 
-def save_figures(solution: Solution, folder: str | Path) -> list[Path]:
-    """Write paths.png, covariance.png, controls.png, homotopy.png (and continuation.png) into ``folder``.
-
-    For a field problem: variance_maps.png and trace.png (:mod:`mobisense.ocp.field_plots`), controls.png,
-    homotopy.png.
-    """
-    folder = Path(folder)
-    written = []
-    figures = FIGURES
+def figures_of(solution: Solution) -> dict[str, Any]:
+    """File name -> drawing function of every figure of a solution (field problems have their own)."""
     if solution.problem.process.field is not None:  # maps of diag Σ instead of Σ's n² entries
         from .field_plots import FIELD_FIGURES
 
-        figures = {**FIELD_FIGURES, "controls.png": plot_controls, "homotopy.png": plot_homotopy}
+        return {**FIELD_FIGURES, "controls.png": plot_controls, "homotopy.png": plot_homotopy}
+    return FIGURES
+
+
+def figure_names(field: bool) -> list[str]:
+    """The names ``--plot`` accepts (file names without ``.png``) for a field problem or another one."""
+    from .field_plots import FIELD_FIGURES
+
+    names = [*FIELD_FIGURES, "controls.png", "homotopy.png"] if field else list(FIGURES)
+    return [name.removesuffix(".png") for name in names]
+
+
+def save_figures(solution: Solution, folder: str | Path, names: Sequence[str] | None = None) -> list[Path]:
+    """Write paths.png, covariance.png, controls.png, homotopy.png (and continuation.png) into ``folder``.
+
+    For a field problem: variance_maps.png and trace.png (:mod:`mobisense.ocp.field_plots`), controls.png,
+    homotopy.png. ``names`` (file names without ``.png``, see :func:`figure_names`) selects some of them;
+    a figure that does not apply (continuation.png without an indirect continuation) is not written.
+    """
+    folder = Path(folder)
+    written = []
+    figures = figures_of(solution)
+    if names is not None:
+        unknown = sorted(set(names) - {name.removesuffix(".png") for name in figures})
+        if unknown:
+            raise ValueError(f"no figure named {', '.join(unknown)} (expected some of {', '.join(figures)})")
+        figures = {name: draw for name, draw in figures.items() if name.removesuffix(".png") in names}
     for name, draw in figures.items():
         figure = draw(solution)
         if figure is not None:

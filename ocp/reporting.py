@@ -4,32 +4,33 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-
-from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.table import Table
+from typing import TYPE_CHECKING
 
 from .homotopy import fixed_schedule
 from .problem import Problem
 from .solution import HomotopyStep, Solution
 from .solving import solve
 
+if TYPE_CHECKING:
+    from rich.table import Table
+
 __all__ = ["SolveReporter"]
 
 
 class SolveReporter:
-    """Runs a solve with progress on stderr and prints the result table on stdout."""
+    """Runs a solve with progress on stderr and prints the result table on stdout (rich, not loaded if quiet)."""
 
     def __init__(self, problem: Problem, quiet: bool = False) -> None:
         self.problem = problem
         self.quiet = quiet
-        self.console = Console(stderr=False, highlight=False)
-        self.err = Console(stderr=True, highlight=False)
 
     def run(self, method: str) -> Solution:
         """Solve with ``method``, updating a progress bar after each ε step."""
         if self.quiet:
             return solve(self.problem, method)
+        from rich.console import Console
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
         h = self.problem.solver.homotopy
         total = 1 if h.mode == "none" else (len(fixed_schedule(h.step)) if h.mode == "fixed" else None)
         if method == "shooting":  # the coarse ε steps and the fine ε = 1 solve
@@ -41,7 +42,7 @@ class SolveReporter:
             BarColumn(),
             TextColumn("{task.fields[info]}"),
             TimeElapsedColumn(),
-            console=self.err,
+            console=Console(stderr=True, highlight=False),
             transient=not sys.stderr.isatty(),
         ) as progress:
             task = progress.add_task(f"{self.problem.name} ({method})", total=total, info="building…")
@@ -60,6 +61,9 @@ class SolveReporter:
         """Print the cost split, homotopy summary and timings."""
         if self.quiet:
             return
+        from rich.console import Console
+        from rich.table import Table
+
         s = solution.summary()
         steps = solution.homotopy
         table = Table(
@@ -98,7 +102,7 @@ class SolveReporter:
                 f"{len(multistart['optima'])} distinct optima: {costs}",
             )
         table.add_row("output", str(out))
-        self.console.print(table)
+        Console(stderr=False, highlight=False).print(table)
 
     @staticmethod
     def _continuation_rows(table: Table, indirect: dict) -> None:
