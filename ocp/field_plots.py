@@ -55,7 +55,7 @@ def plot_trace(solution: Solution):  # noqa: ANN201
     """Tr Σ(t) of the optimum and of the no-control baseline."""
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6.4, 4.0), layout="constrained")
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
     if "trace_Sigma" in solution.baseline:
         ax.plot(solution.t, solution.baseline["trace_Sigma"], "--", color="0.35", label="no control (u ≡ 0)")
     ax.plot(solution.t, np.trace(solution.Sigma, axis1=1, axis2=2), lw=2, label="optimal paths")

@@ -66,7 +66,7 @@ def plot_paths(solution: Solution):  # noqa: ANN201  (matplotlib Figure)
     ys = np.linspace(lo[1] - pad, hi[1] + pad, 160)
     X, Y = np.meshgrid(xs, ys)
     R = effective_noise(solution, 0, np.column_stack([X.ravel(), Y.ravel()])).reshape(X.shape)
-    fig, ax = plt.subplots(figsize=(6.8, 6.4), layout="constrained")
+    fig, ax = plt.subplots(figsize=(6.8, 6.4))
     cs = ax.contourf(X, Y, np.log10(R), levels=20, cmap="Blues_r", alpha=0.8)
     fig.colorbar(cs, ax=ax, label=f"log10 of the noise variance of sensor {problem.sensors[0].name}")
     # the process locations go under everything, so that a sensor ending on one stays visible
@@ -113,8 +113,7 @@ def plot_covariance(solution: Solution):  # noqa: ANN201
     time, variance = _label(solution, time=1), _label(solution, state=2)
     baseline = coasting_covariance(solution)
     feasible = solution.baseline_feasible
-    size = (11, 4.2) if n > 1 else (6.4, 4.2)
-    fig, axes = plt.subplots(1, 2 if n > 1 else 1, figsize=size, squeeze=False, layout="constrained")
+    fig, axes = plt.subplots(1, 2 if n > 1 else 1, figsize=(11, 4.2) if n > 1 else (6.4, 4.2), squeeze=False)
     ax1 = axes[0, 0]
     ax1.semilogy(solution.t, np.trace(baseline, axis1=1, axis2=2), "--", color="0.35", lw=1.6,
                  label="no control (u ≡ 0)" + ("" if feasible else ", violates the terminal constraints"))  # fmt: skip
@@ -133,6 +132,7 @@ def plot_covariance(solution: Solution):  # noqa: ANN201
         ax2.set_ylabel(f"entry of Σ(t) ({variance})")
         ax2.set_title("entries of Σ(t), optimal")
         ax2.legend(fontsize=8, ncol=max(1, n // 2))
+    fig.tight_layout()
     return fig
 
 
@@ -140,7 +140,7 @@ def plot_controls(solution: Solution):  # noqa: ANN201
     """Control components and norm of each sensor vs time."""
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7.5, 4.2), layout="constrained")
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
     for i, sensor in enumerate(solution.problem.sensors):
         line = ax.plot(solution.t_u, np.linalg.norm(solution.u[:, i], axis=1), lw=2, label=f"|u| {sensor.name}")[0]
         ax.plot(solution.t_u, solution.u[:, i, 0], ":", color=line.get_color(), label=f"u_x {sensor.name}")
@@ -159,7 +159,7 @@ def plot_homotopy(solution: Solution):  # noqa: ANN201
     import matplotlib.pyplot as plt
 
     steps = solution.homotopy
-    fig, ax = plt.subplots(figsize=(6.4, 4.0), layout="constrained")
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
     ok = [s for s in steps if s.success]
     bad = [s for s in steps if not s.success]
     iterations = "Newton iterations (BVP)" if solution.method == "indirect" else "Ipopt iterations"
@@ -191,7 +191,7 @@ def plot_continuation(solution: Solution):  # noqa: ANN201
     eps, trace = np.asarray(curve.get("eps", []), float), np.asarray(curve.get("trace_sigma_tf", []), float)
     if eps.size < 2:
         return None
-    fig, ax = plt.subplots(figsize=(6.8, 4.4), layout="constrained")
+    fig, ax = plt.subplots(figsize=(6.8, 4.4))
     ax.plot(eps, trace, "-", color="tab:blue", lw=1.4, label="solution curve (arclength steps)")
     ax.plot(eps, trace, ".", color="tab:blue", ms=4)
     turns = np.flatnonzero(np.diff(np.sign(np.diff(eps))) != 0) + 1
