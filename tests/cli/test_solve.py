@@ -176,3 +176,29 @@ def test_solver_failure_keeps_results_and_names_the_constraint(tmp_path, capsys)
     assert worst["constraint"].startswith(("dynamics of", "continuity of", "initial value of", "terminal"))
     assert 0.0 <= worst["time"] <= 10.0
     assert (out / "solution.nc").exists()
+
+
+@pytest.mark.slow
+def test_plot_writes_only_the_figures_asked_for(tmp_path, capsys):
+    out = tmp_path / "out"
+    args = ["solve", PROBLEMS / "hussein2008.yaml", "--out", out, "--intervals", "20", "--quiet"]
+    code, _, _ = run_cli([*args, "--plot", "homotopy, paths.png"], capsys)
+    assert code == 0
+    assert sorted(p.name for p in out.glob("*.png")) == ["homotopy.png", "paths.png"]
+    assert (out / "solution.nc").is_file() and (out / "summary.json").is_file()
+
+
+@pytest.mark.parametrize(
+    ("option", "expected"),
+    [
+        (["--plot", "paths,maps"], "--plot: no figure maps; expected some of paths, covariance, controls"),
+        (["--plot", "variance_maps"], "--plot: no figure variance_maps"),  # a field problem's figure
+        (["--plot", ","], "expected a comma list of figure names"),
+        (["--plot", "paths", "--no-plot"], "not allowed with argument"),
+    ],
+)
+def test_plot_names_are_checked_before_solving(tmp_path, capsys, option, expected):
+    out = tmp_path / "out"
+    code, _, stderr = run_cli(["solve", PROBLEMS / "hussein2008.yaml", "--out", out, *option], capsys)
+    assert code == 2 and expected in stderr and stderr.count("\n") == 1
+    assert not out.exists()
