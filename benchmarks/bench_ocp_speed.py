@@ -187,6 +187,9 @@ def command(repeats: int) -> bool:
             ],
             "mobisense solve --no-plot": [exe, "solve", problem, "--no-plot", "--quiet", "--out", f"{out}/a"],
             "mobisense solve (figures)": [exe, "solve", problem, "--quiet", "--out", f"{out}/b"],
+            "mobisense solve --plot paths (one figure)": [
+                *(exe, "solve", problem, "--quiet", "--plot", "paths", "--out", f"{out}/d")
+            ],
             "mobisense solve --no-plot --strategy cold": [
                 *(exe, "solve", problem, "--no-plot", "--quiet", "--strategy", "cold", "--out", f"{out}/c")
             ],
