@@ -26,6 +26,8 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "atomic_path": "mobisense.core.files",
         "write_json": "mobisense.core.files",
         "write_netcdf": "mobisense.core.files",
+        "DatasetContent": "mobisense.core.netcdf_writer",
+        "write_content": "mobisense.core.netcdf_writer",
         "write_figure": "mobisense.core.files",
         "open_dataset": "mobisense.core.netcdf",
         "UnitSystem": "mobisense.core.units",

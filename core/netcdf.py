@@ -1,7 +1,8 @@
 """CF-1.10 netCDF files: the global attributes, the encoding and the reading back of every file written.
 
 Every dataset the toolkit writes (``solution.nc``, ``result.nc``, ``trace_grid.nc``, a sweep's task files)
-goes through :func:`prepare` (called by :func:`mobisense.core.files.write_netcdf`), which adds
+goes through :func:`prepare` (called by :func:`mobisense.core.files.write_netcdf`; a
+``DatasetContent`` gets the same rules in :mod:`mobisense.core.netcdf_writer`, without xarray), which adds
 
 * the global attributes ``Conventions = "CF-1.10"``, ``title`` (the producer's, or a generic one),
   ``history`` (UTC time, mobisense version and the command line, or the Python call) and ``source``;
