@@ -73,7 +73,8 @@ def stack_tasks(datasets: list[Any], indices: list[int], task_ids: list[str]) ->
     if any(shape_key(ds) != shape_key(first) for ds in datasets[1:]):
         raise ValueError("stack_tasks: the datasets differ in their variables or shapes")
     data: dict[str, Any] = {}
-    coords: dict[str, Any] = {TASK_DIM: ((TASK_DIM,), np.asarray(indices, np.int64), {"long_name": "index of the task in the sweep"})}
+    index_attrs = {"long_name": "index of the task in the sweep", "units": "1"}
+    coords: dict[str, Any] = {TASK_DIM: ((TASK_DIM,), np.asarray(indices, np.int64), index_attrs)}
     coordinates, renamed = [], []
     for name, var in first.variables.items():
         name = str(name)
@@ -92,7 +93,8 @@ def stack_tasks(datasets: list[Any], indices: list[int], task_ids: list[str]) ->
             data[name] = stacked
     data["task_id"] = ((TASK_DIM,), np.asarray(task_ids, dtype=str), {"long_name": "problem hash of the task"})
     text = [json.dumps({k: _plain(v) for k, v in ds.attrs.items()}) for ds in datasets]
-    data["task_attrs"] = ((TASK_DIM,), np.asarray(text, dtype=str), {"long_name": "global attributes of the task's solution.nc (JSON)"})
+    described = {"long_name": "global attributes of the task's solution.nc (JSON)"}
+    data["task_attrs"] = ((TASK_DIM,), np.asarray(text, dtype=str), described)
     meta = {"coordinates": coordinates, "renamed": renamed}
     attrs = {"title": f"mobisense: solutions of {len(datasets)} sweep tasks", _META: json.dumps(meta)}
     return xr.Dataset(data, coords=coords, attrs=attrs)
@@ -116,14 +118,18 @@ def task_dataset(stacked: Any, index: int) -> Any:
         name = str(name)
         if name in (TASK_DIM, "task_id", "task_attrs"):
             continue
-        original = name[: -len(_OF_TASK)] if name.endswith(_OF_TASK) and name[: -len(_OF_TASK)] in meta["renamed"] else name
+        base = name[: -len(_OF_TASK)]
+        original = base if name.endswith(_OF_TASK) and base in meta["renamed"] else name
         entry = (var.dims, var.values, dict(var.attrs))
         if name in stacked.coords or original in meta["coordinates"]:
             coords[original] = entry
         else:
             data[original] = entry
+    own = json.loads(str(one["task_attrs"].values))
     attrs = {k: stacked.attrs[k] for k in ("Conventions", "history", "source") if k in stacked.attrs}
-    attrs.update(json.loads(str(one["task_attrs"].values)))
+    if "Conventions" in attrs:  # as the task's own file would have it (mobisense.core.netcdf.prepare)
+        attrs["title"] = own.get("title") or "mobisense output"
+    attrs.update(own)
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
 

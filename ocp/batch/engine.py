@@ -23,7 +23,10 @@ from .chains import cut_chains, snake_order, solve_in_chain
 from .cluster import CONNECT_TIMEOUT
 from .worker import solve_task
 
-__all__ = ["open_client", "run_tasks", "nearest_seed"]
+__all__ = ["open_client", "run_tasks", "nearest_seed", "CHAIN_AHEAD"]
+
+#: tasks of one chain submitted ahead of its results
+CHAIN_AHEAD = 16
 
 
 @contextlib.contextmanager
@@ -151,7 +154,9 @@ def run_tasks(
         queues = [iter(chain) for chain in cut_chains(snake_order(coords, keys), len(workers))]
     else:
         queues = [iter(range(n))]
-    limit = 2 if warm_start else in_flight or 2 * len(workers)
+    # a chain's next tasks wait on its worker (their payloads are small), so that the worker never waits for the
+    # client (busy writing a batch of results); cold tasks are queued two per worker
+    limit = CHAIN_AHEAD if warm_start else in_flight or 2 * len(workers)
     futures: dict[Any, tuple[int, int]] = {}  # future -> (task, queue)
     last: dict[int, Any] = {}  # queue -> its latest future (a chain's next task depends on it)
     pending = [0] * len(queues)

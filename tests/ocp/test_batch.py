@@ -15,6 +15,7 @@ from reference_problems import hussein2008
 from mobisense import cli
 from mobisense.core.errors import ConfigError
 from mobisense.core.keypath import get_path, parse_key_path, set_path
+from mobisense.formation.replay.reference import load_checked
 from mobisense.ocp.batch.engine import open_client, run_tasks
 from mobisense.ocp.batch.sweep import SweepSpec, expand_sweep
 from mobisense.ocp.direct.solver import solve_direct
@@ -88,6 +89,10 @@ def test_grid_sweep_equals_single_solves_and_resumes(sweep_file, tmp_path, capsy
         assert solution.cost == row["cost"] and solution.problem.digest() == row["task"]
     with pytest.raises(ConfigError, match="several tasks of a sweep"):
         Solution.load(out / rows["solution_file"][0])
+    # mobisense replay reads a task of a sweep (solution: OUT/tasks/part-….nc, task: INDEX)
+    first = rows.iloc[0]
+    replayed, note, solved_here = load_checked(out / first["solution_file"], None, task=int(first["index"]))
+    assert not solved_here and replayed.cost == first["cost"] and note.startswith("loaded")
     summary = json.loads((out / "summary.json").read_text())
     assert summary["counts"]["solved"] == 9 and summary["best"]["cost"] == pytest.approx(rows["cost"].min())
     assert summary["warm_start"]["warm_tasks"] >= 1
