@@ -161,10 +161,10 @@ def run_tasks(
     last: dict[int, Any] = {}  # queue -> its latest future (a chain's next task depends on it)
     pending = [0] * len(queues)
 
-    def submit_next(q: int) -> None:
+    def submit_next(q: int) -> bool:
         i = next(queues[q], None)
         if i is None:
-            return
+            return False
         key = f"task-{i}-{time.time_ns()}"
         if warm_start:
             pin = {"workers": [workers[q % len(workers)]], "allow_other_workers": True} if workers[0] else {}
@@ -174,6 +174,7 @@ def run_tasks(
         futures[future] = (i, q)
         last[q] = future
         pending[q] += 1
+        return True
 
     for q in range(len(queues)):
         for _ in range(limit):
@@ -191,15 +192,9 @@ def run_tasks(
                 result.pop("carry", None)
                 on_result(i, result)
                 deferred.check()
-                while pending[q] < limit and _more(queues, q, submit_next, pending):
+                while pending[q] < limit and submit_next(q):
                     pass
             deferred.check()
-
-
-def _more(queues: list[Iterator[int]], q: int, submit_next: Callable[[int], None], pending: list[int]) -> bool:
-    before = pending[q]
-    submit_next(q)
-    return pending[q] > before
 
 
 def _wait_some(futures: list[Any], deferred: Any) -> list[Any]:
