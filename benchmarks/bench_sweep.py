@@ -1,9 +1,9 @@
 """Sweep engine performance, measured in one run.
 
 Prints: the speedup of a 40-task sweep (8 α × 5 start positions of the default problem, K = 60) on a dask
-LocalCluster of 2 worker processes vs the same tasks, with the same nearest-neighbour warm starts, serially
-in one process (target ≥ 1.7× on 2 cores); the engine's per-task overhead; the transcription cache's saving
-per task; and the warm-start saving (median solve time of warm vs cold tasks).
+LocalCluster of 2 worker processes vs the same tasks serially in one process (warm: the engine's chains,
+one per worker, against one chain serially; target ≥ 1.7× on 2 cores); the engine's per-task overhead; the
+transcription cache's saving per task; and the warm-start saving (median solve time of warm vs cold tasks).
 
 Usage: ``python benchmarks/bench_sweep.py``
 """
@@ -20,7 +20,8 @@ from rich.console import Console
 from rich.table import Table
 
 from mobisense import Problem
-from mobisense.ocp.batch import nearest_seed, open_client, run_tasks, solve_task
+from mobisense.ocp.batch import open_client, run_tasks, solve_task
+from mobisense.ocp.batch.chains import snake_order, solve_in_chain
 from mobisense.ocp.direct import clear_transcription_cache, solve_direct
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the repository's tests/ package
@@ -43,16 +44,16 @@ def tasks() -> list[dict]:
 
 
 def serial(items: list[dict], warm_start: bool) -> tuple[float, list[dict]]:
-    """The same tasks and warm-start policy in this process, one after the other."""
-    seeds, rows = [], []
+    """The same tasks in this process, one after the other: warm, as one chain in the engine's snake order."""
+    rows = []
     t0 = time.perf_counter()
-    for item in items:
-        seed = nearest_seed(seeds, None, item["coords"]) if warm_start else None
-        payload = {"problem": item["problem"], "seed": seed}
-        result = solve_task(payload)
-        if result["nlp"] is not None:
-            seeds.append((None, item["coords"], result["nlp"]))
-        rows.append(result["row"])
+    if warm_start:
+        previous = None
+        for i in snake_order([item["coords"] for item in items]):
+            previous = solve_in_chain({"problem": items[i]["problem"]}, previous)
+            rows.append(previous["row"])
+    else:
+        rows = [solve_task({"problem": item["problem"]})["row"] for item in items]
     return time.perf_counter() - t0, rows
 
 

@@ -413,9 +413,13 @@ class Solution:
         return cls(**fields)
 
     @classmethod
-    def load(cls, path: str | Path) -> Solution:
-        """Load ``solution.nc`` (or a folder containing it); ``ConfigError`` (one line) if it is not one."""
-        with open_solution_file(path) as (ds, where):
+    def load(cls, path: str | Path, task: int | None = None) -> Solution:
+        """Load ``solution.nc`` (or a folder containing it); ``ConfigError`` (one line) if it is not one.
+
+        A sweep's ``tasks/part-NNNNNN.nc`` holds several tasks: ``task`` is the sweep index of the one to load
+        (the ``index`` column of ``results.parquet``, whose ``solution_file`` column names the file).
+        """
+        with open_solution_file(path, task) as (ds, where):
             try:
                 return cls.from_dataset(ds.load())
             except ConfigError as exc:

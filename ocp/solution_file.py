@@ -20,8 +20,12 @@ def brief_error(exc: BaseException) -> str:
 
 
 @contextmanager
-def open_solution_file(path: str | Path) -> Iterator[tuple[Any, Path]]:
-    """Open a solution netCDF lazily: refuse a missing file, a file larger than the memory budget, non-netCDF data."""
+def open_solution_file(path: str | Path, task: int | None = None) -> Iterator[tuple[Any, Path]]:
+    """Open a solution netCDF lazily: refuse a missing file, a file larger than the memory budget, non-netCDF data.
+
+    A sweep's file of several tasks (``tasks/part-NNNNNN.nc``, :mod:`mobisense.ocp.task_files`) needs
+    ``task``, the sweep index of the one to read; its dataset is then that task's ``solution.nc``.
+    """
     import xarray as xr
 
     from ..core.budget import default_memory_limit, format_bytes
@@ -43,12 +47,28 @@ def open_solution_file(path: str | Path) -> Iterator[tuple[Any, Path]]:
     except (OSError, ValueError, TypeError, KeyError, RuntimeError) as exc:
         raise ConfigError(f"{path}: not a netCDF solution written by mobisense solve ({brief_error(exc)})") from None
     with ds:
-        yield ds, path
+        yield _one_task(ds, path, task), path
 
 
-def read_solution_problem(path: str | Path) -> Problem:
+def _one_task(ds: Any, path: Path, task: int | None) -> Any:
+    from .task_files import is_stacked, task_dataset
+
+    if not is_stacked(ds):
+        if task is not None:
+            raise ConfigError(f"{path}: task: {task} given, but the file holds one solution, not a sweep's tasks")
+        return ds
+    if task is None:
+        held = ", ".join(str(int(i)) for i in ds["task"].values[:8])
+        raise ConfigError(f"{path}: holds several tasks of a sweep ({held}, …); name one (task: INDEX)")
+    try:
+        return task_dataset(ds.load(), int(task))
+    except KeyError as exc:
+        raise ConfigError(f"{path}: task: {exc.args[0]}") from None
+
+
+def read_solution_problem(path: str | Path, task: int | None = None) -> Problem:
     """The problem stored in a ``solution.nc`` (its ``problem_yaml`` attribute), without loading the arrays."""
-    with open_solution_file(path) as (ds, where):
+    with open_solution_file(path, task) as (ds, where):
         if "problem_yaml" not in ds.attrs:
             raise ConfigError(f"{where}: not a solution written by mobisense solve (no problem_yaml attribute)")
         text = str(ds.attrs["problem_yaml"])

@@ -74,7 +74,10 @@ class OcpReplayScenario(StrictModel):
 
     kind: Literal["plan_replay"] | None = Field(None, description="file kind (optional: 'solution' tells it)")
     name: str = Field(pattern=r"^[A-Za-z0-9_.\-]+$")
-    solution: str = Field(description="solution.nc written by mobisense solve")
+    solution: str = Field(description="solution.nc written by mobisense solve (or a sweep's tasks/part-NNNNNN.nc)")
+    task: int | None = Field(
+        None, ge=0, description="the sweep index of the task to replay, when 'solution' is a sweep's part file"
+    )
     problem: str | None = Field(
         None, description="problem YAML solved first when the solution file is missing"
     )

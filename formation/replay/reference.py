@@ -29,12 +29,12 @@ if TYPE_CHECKING:
 __all__ = ["load_checked", "load_or_solve", "reference_status", "ReferenceTrajectory", "TrackingController"]
 
 
-def _read_solution(path: Path) -> tuple[Solution | None, str]:
+def _read_solution(path: Path, task: int | None = None) -> tuple[Solution | None, str]:
     """The solution in ``path`` (None and why if it cannot be used)."""
     from ...ocp.solution import Solution
 
     try:
-        solution = Solution.load(path)
+        solution = Solution.load(path, task=task)
     except Exception as err:  # noqa: BLE001  (any failure to read means: not a usable solution file)
         return None, f"{path} is not a solution file written by mobisense solve ({type(err).__name__}: {err})"
     if not solution.success:
@@ -42,7 +42,9 @@ def _read_solution(path: Path) -> tuple[Solution | None, str]:
     return solution, ""
 
 
-def _check(solution_path: Path, problem_path: Path | None) -> tuple[Solution | None, Problem | None, str]:
+def _check(
+    solution_path: Path, problem_path: Path | None, task: int | None = None
+) -> tuple[Solution | None, Problem | None, str]:
     """Solution (or None: solve first), the problem (if given) and what was found (see :func:`load_checked`)."""
     from ...core.config import ConfigError
     from ...ocp.problem import load_problem
@@ -52,7 +54,7 @@ def _check(solution_path: Path, problem_path: Path | None) -> tuple[Solution | N
         if problem is None:
             raise ConfigError(f"{solution_path}: file not found (give 'problem:' to solve it first)")
         return None, problem, f"{solution_path} not found"
-    solution, why = _read_solution(solution_path)
+    solution, why = _read_solution(solution_path, task)
     if solution is None:
         if problem is None:
             raise ConfigError(f"{why}; give 'problem:' to solve it instead")
@@ -67,14 +69,19 @@ def _check(solution_path: Path, problem_path: Path | None) -> tuple[Solution | N
     return solution, problem, f"loaded {solution_path} (problem hash {current} matches {problem_path})"
 
 
-def reference_status(solution_path: Path, problem_path: Path | None) -> str:
+def reference_status(solution_path: Path, problem_path: Path | None, task: int | None = None) -> str:
     """What :func:`load_checked` would do, without solving (for ``mobisense validate``)."""
-    solution, _, note = _check(solution_path, problem_path)
+    solution, _, note = _check(solution_path, problem_path, task)
     return note if solution is not None else f"{note}: the replay solves {problem_path} first"
 
 
-def load_checked(solution_path: Path, problem_path: Path | None) -> tuple[Solution, str, bool]:
+def load_checked(
+    solution_path: Path, problem_path: Path | None, task: int | None = None
+) -> tuple[Solution, str, bool]:
     """The solution of ``solution_path`` if it is up to date with ``problem_path``, else ``problem_path`` solved.
+
+    ``task`` picks one task of a sweep's ``tasks/part-NNNNNN.nc`` (its sweep index; see
+    :mod:`mobisense.ocp.task_files`).
 
     The solution's problem hash (:meth:`~mobisense.ocp.problem.Problem.digest`, which covers the solver
     options) must equal the problem file's; a missing, unreadable, failed or stale solution is replaced by
@@ -97,7 +104,7 @@ def load_checked(solution_path: Path, problem_path: Path | None) -> tuple[Soluti
     """
     from ...ocp.direct.solver import solve_direct
 
-    solution, problem, note = _check(solution_path, problem_path)
+    solution, problem, note = _check(solution_path, problem_path, task)
     if solution is not None:
         return solution, note, False
     assert problem is not None  # _check raises when there is neither

@@ -185,7 +185,7 @@ def run_plan_replay(scenario: Any, source: Path, seed: int | None = None) -> Pla
     from .reference import load_checked
 
     solution_path = resolve(source, scenario.solution)
-    solution, note, solved_here = load_checked(solution_path, resolve(source, scenario.problem))
+    solution, note, solved_here = load_checked(solution_path, resolve(source, scenario.problem), scenario.task)
     N = solution.problem.N
     if scenario.initial_offset is not None and len(scenario.initial_offset) != N:
         raise ConfigError(

@@ -2,10 +2,10 @@
 
 Tasks carry plain data (problem dicts, numpy arrays), never CasADi objects; each worker process builds and caches the
 transcription of a problem structure (:func:`mobisense.ocp.direct.solver.transcription_for`) and re-solves it with new
-parameters. The client keeps at most ``2 × workers`` tasks in flight so that each new task can be warm-started from the
-nearest finished task of the same structure (primal–dual point re-scaled by :meth:`DirectCollocation.transfer`). A task
-that raises, or whose worker dies more often than dask retries, becomes a row with ``status = "error"``; nothing stops
-the sweep.
+parameters. Warm-started tasks run in chains of neighbours, one per worker (:mod:`mobisense.ocp.batch.chains`): each
+task is started on its worker from its predecessor's primal–dual point (re-scaled by
+:meth:`DirectCollocation.transfer`), without a round trip through the client. A task that raises, or whose worker
+dies more often than dask retries, becomes a row with ``status = "error"``; nothing stops the sweep.
 """
 
 from __future__ import annotations
@@ -19,10 +19,14 @@ import numpy as np
 
 from ...core.errors import ConfigError
 from ...core.interrupts import deferred_interrupts
+from .chains import cut_chains, snake_order, solve_in_chain
 from .cluster import CONNECT_TIMEOUT
 from .worker import solve_task
 
-__all__ = ["open_client", "run_tasks", "nearest_seed"]
+__all__ = ["open_client", "run_tasks", "nearest_seed", "CHAIN_AHEAD"]
+
+#: tasks of one chain submitted ahead of its results
+CHAIN_AHEAD = 16
 
 
 @contextlib.contextmanager
@@ -134,50 +138,74 @@ def run_tasks(
     """Run ``payloads`` on ``client``, calling ``on_result(i, result)`` as each finishes (in completion order).
 
     ``result`` is the worker's dict, or ``{"row": {"status": "error", "error": …}}`` if the task failed.
-    With ``warm_start``, a task submitted after others finished is seeded from the nearest one (Euclidean
-    distance of ``coordinates``, normalised per dimension) with the same ``structure_keys`` entry.
+    With ``warm_start`` the tasks run in chains (:mod:`mobisense.ocp.batch.chains`): ordered along the
+    ``coordinates`` (grouped by ``structure_keys``), cut into one chain per worker, each task started on its
+    worker from its predecessor's converged point; without, every task starts cold, at most ``in_flight``
+    (default 2 × workers) at a time. Ctrl-C and SIGTERM are held while dask is waited on and raised
+    (``KeyboardInterrupt``) between two results, never inside dask's own code.
     """
-    from dask.distributed import as_completed
-
     n = len(payloads)
     if n == 0:
         return
     keys = structure_keys or [None] * n
     coords = coordinates or [np.zeros(1)] * n
-    spread = np.ptp(np.stack(coords), axis=0) if len(coords) > 1 else np.ones_like(coords[0])
-    spread[spread == 0] = 1.0
-    coords = [c / spread for c in coords]
-    seeds: list[tuple[Any, np.ndarray, dict]] = []
-    n_workers = max(1, len(client.scheduler_info().get("workers", {})))
-    limit = in_flight or 2 * n_workers
-    pending = iter(range(n))
-    futures: dict[Any, int] = {}
-    queue = as_completed()
+    workers = sorted(client.scheduler_info().get("workers", {})) or [None]
+    if warm_start:
+        queues = [iter(chain) for chain in cut_chains(snake_order(coords, keys), len(workers))]
+    else:
+        queues = [iter(range(n))]
+    # a chain's next tasks wait on its worker (their payloads are small), so that the worker never waits for the
+    # client (busy writing a batch of results); cold tasks are queued two per worker
+    limit = CHAIN_AHEAD if warm_start else in_flight or 2 * len(workers)
+    futures: dict[Any, tuple[int, int]] = {}  # future -> (task, queue)
+    last: dict[int, Any] = {}  # queue -> its latest future (a chain's next task depends on it)
+    pending = [0] * len(queues)
 
-    def submit_next() -> bool:
-        i = next(pending, None)
+    def submit_next(q: int) -> bool:
+        i = next(queues[q], None)
         if i is None:
             return False
-        payload = dict(payloads[i])
-        if warm_start and payload.get("guess_seed") is None:
-            payload["seed"] = nearest_seed(seeds, keys[i], coords[i])
-        future = client.submit(solve_task, payload, pure=False, key=f"task-{i}-{time.time_ns()}")
-        futures[future] = i
-        queue.add(future)
+        key = f"task-{i}-{time.time_ns()}"
+        if warm_start:
+            pin = {"workers": [workers[q % len(workers)]], "allow_other_workers": True} if workers[0] else {}
+            future = client.submit(solve_in_chain, payloads[i], last.get(q), pure=False, key=key, **pin)
+        else:
+            future = client.submit(solve_task, payloads[i], pure=False, key=key)
+        futures[future] = (i, q)
+        last[q] = future
+        pending[q] += 1
         return True
 
-    # the first wave (one task per worker) starts cold; later tasks are queued two per worker, each seeded
-    # from the nearest task finished when it is submitted
-    for _ in range(min(n_workers if warm_start else limit, n)):
-        submit_next()
-    for future in queue:
-        i = futures.pop(future)
+    for q in range(len(queues)):
+        for _ in range(limit):
+            submit_next(q)
+    with deferred_interrupts(raise_at_exit=False) as deferred:
+        while futures:
+            done = _wait_some(list(futures), deferred)
+            for future in done:
+                i, q = futures.pop(future)
+                pending[q] -= 1
+                try:
+                    result = future.result()
+                except Exception as exc:  # noqa: BLE001  (a task's failure is data, not a crash of the sweep)
+                    result = {"row": {"status": "error", "error": f"{type(exc).__name__}: {exc}"}}
+                result.pop("carry", None)
+                on_result(i, result)
+                deferred.check()
+                while pending[q] < limit and submit_next(q):
+                    pass
+            deferred.check()
+
+
+def _wait_some(futures: list[Any], deferred: Any) -> list[Any]:
+    """The finished ones of ``futures``, waiting in short slices so that a held Ctrl-C is acted on promptly."""
+    from dask.distributed import wait
+
+    while True:
+        deferred.check()
         try:
-            result = future.result()
-        except Exception as exc:  # noqa: BLE001  (a task's failure is data, not a crash of the sweep)
-            result = {"row": {"status": "error", "error": f"{type(exc).__name__}: {exc}"}}
-        if result.get("nlp") is not None:
-            seeds.append((keys[i], coords[i], result["nlp"]))
-        on_result(i, result)
-        while len(futures) < limit and submit_next():
-            pass
+            finished, _ = wait(futures, timeout=0.2, return_when="FIRST_COMPLETED")
+        except TimeoutError:
+            continue
+        if finished:
+            return [f for f in futures if f in finished]

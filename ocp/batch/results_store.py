@@ -41,7 +41,10 @@ _TYPES = {
     "error": "string",
     "start": "string",
     "transcription_cached": "bool",
+    "solution_file": "string",
 }
+#: columns added after the first release of the format (read as missing from older fragments)
+_LATER = ("solution_file",)
 
 
 def _number(x: Any) -> bool:
@@ -98,6 +101,7 @@ class ResultStore:
 
     def read(self) -> dict[str, dict[str, Any]]:
         """Every task's last row (task id -> row, varied values decoded); ``ConfigError`` naming a corrupt file."""
+        import pyarrow as pa
         import pyarrow.parquet as pq
 
         if self.path.exists() and not self.path.is_dir():
@@ -106,6 +110,9 @@ class ResultStore:
         for fragment in self.fragments():
             try:
                 table = pq.read_table(fragment)
+                for name in _LATER:
+                    if name not in table.column_names:
+                        table = table.append_column(name, pa.nulls(len(table), self.schema.field(name).type))
                 if not set(self.schema.names) <= set(table.column_names):
                     missing = sorted(set(self.schema.names) - set(table.column_names))
                     raise ValueError(f"missing columns {brief(missing, 60)}")

@@ -13,8 +13,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ...core.files import write_json, write_netcdf
+from ...core.files import write_json
 from ...core.interrupts import deferred_interrupts
+from ..task_files import remove_unlisted, write_task_files
 from .sweep import expand_sweep, load_sweep
 from .sweep_report import SweepProgress, sweep_summary
 
@@ -34,6 +35,7 @@ RESULT_COLUMNS = [
     "error",
     "start",
     "transcription_cached",
+    "solution_file",
 ]
 #: task statuses that are final (not re-run on resume)
 DONE = ("solved", "failed")
@@ -82,14 +84,17 @@ def run_sweep(
     out : str or Path
         Result folder: ``results.parquet`` (a folder of parquet fragments, one appended per batch of finished
         tasks, so an interrupted sweep resumes), ``sweep.json`` (which sweep made the folder),
-        ``tasks/<index>_<task>/solution.nc`` and ``summary.json``.
+        ``tasks/part-NNNNNN.nc`` (the solutions of the tasks finished between two flushes, stacked along a
+        ``task`` dimension: :mod:`mobisense.ocp.task_files`; each row's ``solution_file`` names its file)
+        and ``summary.json``.
     scheduler : str, optional
         Address of a running dask scheduler (with dask ``security``); default a local cluster of ``workers``
         processes.
     workers : int, optional
         Local worker processes (default one per core, at most one per task).
     warm_start : bool
-        Warm-start each task from the nearest finished task of the same structure.
+        Solve the tasks in chains of neighbours, one per worker, each warm-started from its predecessor
+        (:mod:`mobisense.ocp.batch.chains`); otherwise every task starts from the coasting solution.
     time_limit : float, optional
         Wall-clock limit (s) of each Ipopt solve (sets ``solver.time_limit``).
     quiet : bool
@@ -138,7 +143,7 @@ def run_sweep(
         previous = store.read() if resuming else {}
         rows = {t: r for t, r in previous.items() if r["status"] in DONE}
         todo = [t for t in tasks if t.task not in rows]
-        batch = _Batch(store)
+        batch = _Batch(store, out)
         progress = SweepProgress(len(tasks), len(tasks) - len(todo), quiet=quiet)
 
         def on_result(i: int, result: dict[str, Any]) -> None:
@@ -146,11 +151,9 @@ def run_sweep(
             row = {"task": task.task, "index": task.index, **task.values}
             row.update({c: None for c in RESULT_COLUMNS})
             row.update(result["row"])
-            with deferred_interrupts():  # a task's solution file and its row: both or neither
-                if "dataset" in result:
-                    write_netcdf(out / "tasks" / f"{task.index:04d}_{task.task}" / "solution.nc", result["dataset"])
+            with deferred_interrupts():  # a task's solution and its row are flushed together: both or neither
                 rows[task.task] = row
-                batch.add(row, last=len(rows) == len(tasks))
+                batch.add(row, result.get("dataset"), last=len(rows) == len(tasks))
             progress.advance(row)
 
         connection = open_client(scheduler, min(local, len(todo)) or None, security) if todo else nullcontext()
@@ -171,6 +174,7 @@ def run_sweep(
             finally:
                 batch.flush()  # rows of finished tasks are kept however the run ends
         store.compact()
+        remove_unlisted(out, rows.values())
         summary = sweep_summary(spec, tasks, list(rows.values()), resumed=len(tasks) - len(todo))
         write_json(out / "summary.json", summary)
         progress.report(summary, out)
@@ -179,21 +183,31 @@ def run_sweep(
 
 
 class _Batch:
-    """Rows waiting to be appended: flushed every :data:`BATCH_ROWS` rows or :data:`BATCH_SECONDS` seconds."""
+    """Rows (and their solutions) waiting to be written: every :data:`BATCH_ROWS` rows or :data:`BATCH_SECONDS` s.
 
-    def __init__(self, store: Any) -> None:
+    A flush writes the solutions as ``tasks/part-NNNNNN.nc`` (one file per shape of dataset, see
+    :mod:`mobisense.ocp.task_files`), then the rows naming them as one results fragment.
+    """
+
+    def __init__(self, store: Any, folder: Path) -> None:
         self.store = store
+        self.folder = folder
         self.rows: list[dict[str, Any]] = []
+        self.datasets: list[Any] = []
         self.since = time.monotonic()
 
-    def add(self, row: dict[str, Any], last: bool = False) -> None:
+    def add(self, row: dict[str, Any], dataset: Any = None, last: bool = False) -> None:
         self.rows.append(row)
+        self.datasets.append(dataset)
         if last or len(self.rows) >= BATCH_ROWS or time.monotonic() - self.since >= BATCH_SECONDS:
             self.flush()
 
     def flush(self) -> None:
         if not self.rows:
             return
-        rows, self.rows = self.rows, []
+        rows, datasets = self.rows, self.datasets
+        self.rows, self.datasets = [], []
         self.since = time.monotonic()
-        self.store.append(rows)
+        with deferred_interrupts():  # the files and the rows naming them: both, or rows left to re-run
+            write_task_files(self.folder, rows, datasets)
+            self.store.append(rows)

@@ -13,11 +13,14 @@ import yaml
 from reference_problems import hussein2008
 
 from mobisense import cli
+from mobisense.core.errors import ConfigError
 from mobisense.core.keypath import get_path, parse_key_path, set_path
+from mobisense.formation.replay.reference import load_checked
 from mobisense.ocp.batch.engine import open_client, run_tasks
 from mobisense.ocp.batch.sweep import SweepSpec, expand_sweep
 from mobisense.ocp.direct.solver import solve_direct
 from mobisense.ocp.problem import Problem
+from mobisense.ocp.solution import Solution
 
 pytestmark = pytest.mark.slow  # every test here runs solvers or subprocesses for seconds
 
@@ -80,15 +83,24 @@ def test_grid_sweep_equals_single_solves_and_resumes(sweep_file, tmp_path, capsy
         single = solve_direct(Problem.from_dict(data))
         # same optimum whether warm-started from a neighbour or continued from coasting (Ipopt tol 1e-9)
         assert row["cost"] == pytest.approx(single.cost, rel=1e-8)
-    assert len(list((out / "tasks").glob("*/solution.nc"))) == 9
+    # every task's solution is in the part file its row names, the same as the row says
+    for _, row in rows.iterrows():
+        solution = Solution.load(out / row["solution_file"], task=int(row["index"]))
+        assert solution.cost == row["cost"] and solution.problem.digest() == row["task"]
+    with pytest.raises(ConfigError, match="several tasks of a sweep"):
+        Solution.load(out / rows["solution_file"][0])
+    # mobisense replay reads a task of a sweep (solution: OUT/tasks/part-….nc, task: INDEX)
+    first = rows.iloc[0]
+    replayed, note, solved_here = load_checked(out / first["solution_file"], None, task=int(first["index"]))
+    assert not solved_here and replayed.cost == first["cost"] and note.startswith("loaded")
     summary = json.loads((out / "summary.json").read_text())
     assert summary["counts"]["solved"] == 9 and summary["best"]["cost"] == pytest.approx(rows["cost"].min())
     assert summary["warm_start"]["warm_tasks"] >= 1
     # re-running the same command computes nothing
-    stamps = {p: p.stat().st_mtime_ns for p in (out / "tasks").glob("*/solution.nc")}
+    stamps = {p: p.stat().st_mtime_ns for p in (out / "tasks").glob("part-*.nc")}
     assert cli.main(["sweep", str(sweep_file), "--out", str(out), "--workers", "2", "--quiet"]) == 0
     assert json.loads((out / "summary.json").read_text())["counts"]["resumed"] == 9
-    assert stamps == {p: p.stat().st_mtime_ns for p in (out / "tasks").glob("*/solution.nc")}
+    assert stamps and stamps == {p: p.stat().st_mtime_ns for p in (out / "tasks").glob("part-*.nc")}
 
 
 def test_interrupted_sweep_resumes_without_recomputing(sweep_file, tmp_path, monkeypatch):

@@ -1,0 +1,169 @@
+"""The solutions of a sweep's tasks, many to a file: ``tasks/part-NNNNNN.nc`` with a ``task`` dimension.
+
+One HDF5 file per task costs more than a warm-started solve (creating a file and its ~20 datasets: 0.1–0.4 s
+against ≈ 10 ms of Ipopt), so the tasks finished between two flushes of the results are written as one file,
+each of their ``solution.nc`` datasets stacked along a leading ``task`` dimension (one file per set of
+equally shaped datasets). In that file
+
+* ``task`` (coordinate) is the task's index in the sweep (the ``index`` column of ``results.parquet``) and
+  ``task_id`` its problem hash (the ``task`` column); ``results.parquet`` names each task's file in its
+  ``solution_file`` column (relative to the sweep folder);
+* every variable of ``solution.nc`` keeps its name, attributes and dimensions, with ``task`` in front; an index
+  coordinate whose values differ between the tasks (``time`` when the horizon is varied) is the variable
+  ``<name>_of_task`` (task, <name>); coordinates equal in all tasks (sensor names, ``xy``) stay shared;
+* the global attributes of each task's dataset (its problem YAML, costs, status, solver statistics) are the JSON
+  string ``task_attrs`` (task,).
+
+:func:`task_dataset` cuts one task's dataset back out — identical to what ``solution.nc`` held — and
+:func:`mobisense.ocp.solution.Solution.load` with ``task=INDEX`` reads it as a Solution (``mobisense replay``:
+``solution: OUT/tasks/part-000001.nc`` with ``task: INDEX``).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["TASK_DIM", "TASKS", "stack_tasks", "task_dataset", "shape_key", "is_stacked", "write_task_files",
+           "remove_unlisted"]
+
+#: the folder of the task files inside a sweep folder
+TASKS = "tasks"
+_PART = re.compile(r"^part-(\d{6})\.nc$")
+
+#: the leading dimension of a file of several tasks
+TASK_DIM = "task"
+_OF_TASK = "_of_task"
+_META = "mobisense_stacked_json"
+
+
+def shape_key(dataset: Any) -> tuple[Any, ...]:
+    """Datasets with equal keys stack into one file: names, dimensions, shapes and attributes of the variables."""
+    return tuple(
+        (str(name), var.dims, var.shape, var.dtype.kind, json.dumps(var.attrs, sort_keys=True, default=str))
+        for name, var in sorted(dataset.variables.items(), key=lambda item: str(item[0]))
+    )
+
+
+def is_stacked(dataset: Any) -> bool:
+    """Whether a dataset read from a file holds several tasks (see the module notes)."""
+    return _META in dataset.attrs
+
+
+def stack_tasks(datasets: list[Any], indices: list[int], task_ids: list[str]) -> Any:
+    """Stack equally shaped ``solution.nc`` datasets (same :func:`shape_key`) along ``task``.
+
+    Parameters
+    ----------
+    datasets : list of xarray.Dataset
+        One per task, as :meth:`mobisense.ocp.solution.Solution.to_dataset` returns them.
+    indices : list of int
+        The tasks' indices in the sweep (the ``task`` coordinate).
+    task_ids : list of str
+        The tasks' problem hashes (``task_id``).
+    """
+    import xarray as xr
+
+    first = datasets[0]
+    if any(shape_key(ds) != shape_key(first) for ds in datasets[1:]):
+        raise ValueError("stack_tasks: the datasets differ in their variables or shapes")
+    data: dict[str, Any] = {}
+    index_attrs = {"long_name": "index of the task in the sweep", "units": "1"}
+    coords: dict[str, Any] = {TASK_DIM: ((TASK_DIM,), np.asarray(indices, np.int64), index_attrs)}
+    coordinates, renamed = [], []
+    for name, var in first.variables.items():
+        name = str(name)
+        values = [ds.variables[name].values for ds in datasets]
+        is_coord = name in first.coords
+        if is_coord and all(np.array_equal(values[0], v) for v in values[1:]):
+            coords[name] = (var.dims, values[0], dict(var.attrs))  # shared by every task
+            continue
+        stacked = ((TASK_DIM, *var.dims), np.stack(values), dict(var.attrs))
+        if is_coord:
+            coordinates.append(name)
+        if name in first.dims:  # an index coordinate cannot have two dimensions: renamed
+            renamed.append(name)
+            data[name + _OF_TASK] = stacked
+        else:
+            data[name] = stacked
+    data["task_id"] = ((TASK_DIM,), np.asarray(task_ids, dtype=str), {"long_name": "problem hash of the task"})
+    text = [json.dumps({k: _plain(v) for k, v in ds.attrs.items()}) for ds in datasets]
+    described = {"long_name": "global attributes of the task's solution.nc (JSON)"}
+    data["task_attrs"] = ((TASK_DIM,), np.asarray(text, dtype=str), described)
+    meta = {"coordinates": coordinates, "renamed": renamed}
+    attrs = {"title": f"mobisense: solutions of {len(datasets)} sweep tasks", _META: json.dumps(meta)}
+    return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def task_dataset(stacked: Any, index: int) -> Any:
+    """The ``solution.nc`` dataset of the task with sweep index ``index`` in a file of several tasks.
+
+    Raises ``KeyError`` (naming the indices held) when the file does not hold that task.
+    """
+    import xarray as xr
+
+    held = [int(i) for i in stacked[TASK_DIM].values]
+    if index not in held:
+        shown = ", ".join(map(str, held[:12])) + (" …" if len(held) > 12 else "")
+        raise KeyError(f"task {index} is not in this file (it holds tasks {shown})")
+    meta = json.loads(stacked.attrs[_META])
+    one = stacked.isel({TASK_DIM: held.index(index)})
+    data, coords = {}, {}
+    for name, var in one.variables.items():
+        name = str(name)
+        if name in (TASK_DIM, "task_id", "task_attrs"):
+            continue
+        base = name[: -len(_OF_TASK)]
+        original = base if name.endswith(_OF_TASK) and base in meta["renamed"] else name
+        entry = (var.dims, var.values, dict(var.attrs))
+        if name in stacked.coords or original in meta["coordinates"]:
+            coords[original] = entry
+        else:
+            data[original] = entry
+    own = json.loads(str(one["task_attrs"].values))
+    attrs = {k: stacked.attrs[k] for k in ("Conventions", "history", "source") if k in stacked.attrs}
+    if "Conventions" in attrs:  # as the task's own file would have it (mobisense.core.netcdf.prepare)
+        attrs["title"] = own.get("title") or "mobisense output"
+    attrs.update(own)
+    return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def write_task_files(folder: Path, rows: list[dict[str, Any]], datasets: list[Any]) -> None:
+    """Write the ``datasets`` of finished tasks as new ``tasks/part-NNNNNN.nc`` files; set each row's ``solution_file``.
+
+    ``rows[k]`` (with ``index`` and ``task``) belongs to ``datasets[k]`` (``None``: the task has no solution, an
+    error row). Tasks whose datasets have the same :func:`shape_key` share a file.
+    """
+    from ..core.files import write_netcdf
+
+    groups: dict[tuple[Any, ...], list[int]] = {}
+    for k, ds in enumerate(datasets):
+        if ds is not None:
+            groups.setdefault(shape_key(ds), []).append(k)
+    folder = Path(folder) / TASKS
+    number = max((int(m.group(1)) for p in folder.glob("part-*.nc") if (m := _PART.match(p.name))), default=0)
+    for members in groups.values():
+        number += 1
+        name = f"part-{number:06d}.nc"
+        stacked = stack_tasks([datasets[k] for k in members], [int(rows[k]["index"]) for k in members],
+                              [str(rows[k]["task"]) for k in members])  # fmt: skip
+        write_netcdf(folder / name, stacked)
+        for k in members:
+            rows[k]["solution_file"] = f"{TASKS}/{name}"
+
+
+def remove_unlisted(folder: Path, rows: Iterable[dict[str, Any]]) -> None:
+    """Delete the task files no row names (left by a run killed between a file and its rows)."""
+    listed = {str(r.get("solution_file")) for r in rows}
+    for path in (Path(folder) / TASKS).glob("part-*.nc"):
+        if _PART.match(path.name) and f"{TASKS}/{path.name}" not in listed:
+            path.unlink(missing_ok=True)
+
+
+def _plain(value: Any) -> Any:
+    return value.item() if isinstance(value, np.generic) else value

@@ -1,0 +1,62 @@
+"""A sweep's stacked task files and chain order (fast: synthetic datasets, no solver)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from mobisense.core.files import write_netcdf
+from mobisense.core.netcdf import open_dataset
+from mobisense.ocp.batch.chains import cut_chains, snake_order
+from mobisense.ocp.task_files import shape_key, stack_tasks, task_dataset
+
+
+def _solution_like(k: int, horizon: float) -> xr.Dataset:
+    t = np.linspace(0.0, horizon, 7)
+    rng = np.random.default_rng(k)
+    data = {
+        "p": (("time", "sensor", "xy"), rng.normal(size=(7, 2, 2)), {"long_name": "sensor position", "units": "m"}),
+        "nlp_w": (("nlp_variable",), rng.normal(size=11), {"long_name": "w", "units": "1"}),
+    }
+    coords = {"time": ("time", t, {"long_name": "time", "units": "s"}), "sensor": ["s1", "s2"], "xy": ["x", "y"]}
+    attrs = {"problem_yaml": f"name: task{k}\n", "status": "solved", "eps": 1.0, "terminal_cost": 0.1 * k}
+    return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def test_stacked_file_gives_back_each_task_as_written_alone(tmp_path):
+    # tasks 3 and 5 share the time grid, task 8 another one: 'time' becomes a per-task variable
+    datasets = [_solution_like(3, 10.0), _solution_like(5, 10.0), _solution_like(8, 12.0)]
+    assert len({shape_key(ds) for ds in datasets}) == 1
+    write_netcdf(tmp_path / "part.nc", stack_tasks(datasets, [3, 5, 8], ["a", "b", "c"]))
+    stacked = open_dataset(tmp_path / "part.nc")
+    for index, ds in zip([3, 5, 8], datasets, strict=True):
+        write_netcdf(tmp_path / f"{index}.nc", ds)
+        alone = open_dataset(tmp_path / f"{index}.nc")
+        back = task_dataset(stacked, index)
+        for d in (alone, back):
+            d.attrs.pop("history")  # the write time
+        xr.testing.assert_identical(back, alone)  # values bit for bit, attributes, coordinates and labels
+    with pytest.raises(KeyError, match="task 4 is not in this file"):
+        task_dataset(stacked, 4)
+
+
+def test_datasets_of_other_shapes_are_not_stacked():
+    small = _solution_like(1, 10.0).isel(nlp_variable=slice(0, 5))
+    with pytest.raises(ValueError, match="differ"):
+        stack_tasks([_solution_like(0, 10.0), small], [0, 1], ["a", "b"])
+
+
+def test_snake_order_visits_grid_neighbours_and_keeps_structures_together():
+    # a 3 × 4 grid (index = 4 i + j): every step of the snake changes one value by one grid step
+    coords = [np.array([i, j], float) for i in range(3) for j in range(4)]
+    order = snake_order(coords)
+    assert sorted(order) == list(range(12))
+    steps = [np.abs(coords[a] - coords[b]).sum() for a, b in zip(order, order[1:], strict=False)]
+    assert steps == [1.0] * 11
+    keys = ["A" if k % 2 else "B" for k in range(12)]
+    grouped = snake_order(coords, keys)
+    assert {keys[k] for k in grouped[:6]} == {"B"} and {keys[k] for k in grouped[6:]} == {"A"}
+    chains = cut_chains(order, 5)
+    assert [len(c) for c in chains] == [2, 3, 2, 3, 2] and sum(chains, []) == order
+    assert cut_chains(order[:1], 4) == [order[:1]]
