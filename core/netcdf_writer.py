@@ -11,8 +11,9 @@ data variables, the ``coordinates`` attribute naming the auxiliary coordinates o
 characters with ``_Encoding = "utf-8"`` on a ``string<n>`` dimension). ``xarray.open_dataset`` reads either
 file as the same Dataset (tests/cli/test_netcdf_writer.py compares them).
 
-Supported: numeric (integer, floating-point) data variables and coordinates, and string-valued index
-coordinates; anything else is a ``TypeError`` (write it with ``write_netcdf(path, content.to_xarray())``).
+Supported: numeric (integer, floating-point) data variables and coordinates, text (unicode) data variables,
+and string-valued index coordinates; anything else is a ``TypeError`` (write it with
+``write_netcdf(path, content.to_xarray())``).
 """
 
 from __future__ import annotations
@@ -116,8 +117,9 @@ def _checked(table: dict[str, Entry], what: str) -> dict[str, Entry]:
         if array.ndim != len(dims):
             raise ValueError(f"{what} {name!r}: {array.ndim}-dimensional values for dimensions {tuple(dims)}")
         string_index = array.dtype.kind in "OUS" and tuple(dims) == (name,) and what == "coordinate"
-        if array.dtype.kind not in "iuf" and not string_index:
-            raise TypeError(f"{what} {name!r}: values of type {array.dtype} (expected integers or floats)")
+        text = array.dtype.kind == "U" and what == "data variable"  # characters on a string<n> dimension
+        if array.dtype.kind not in "iuf" and not (string_index or text):
+            raise TypeError(f"{what} {name!r}: values of type {array.dtype} (expected integers, floats or text)")
         out[str(name)] = (tuple(dims), array, dict(attrs))
     return out
 

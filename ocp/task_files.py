@@ -29,6 +29,8 @@ from typing import Any
 
 import numpy as np
 
+from ..core.netcdf_writer import DatasetContent
+
 __all__ = ["TASK_DIM", "TASKS", "stack_tasks", "task_dataset", "shape_key", "is_stacked", "write_task_files",
            "remove_unlisted"]
 
@@ -43,11 +45,27 @@ _META = "mobisense_stacked_json"
 
 
 def shape_key(dataset: Any) -> tuple[Any, ...]:
-    """Datasets with equal keys stack into one file: names, dimensions, shapes and attributes of the variables."""
+    """Datasets with equal keys stack into one file: names, dimensions, shapes and attributes of the variables.
+
+    ``dataset`` is an ``xarray.Dataset`` or a :class:`~mobisense.core.netcdf_writer.DatasetContent`.
+    """
+    variables, _, _ = _parts(dataset)
     return tuple(
-        (str(name), var.dims, var.shape, var.dtype.kind, json.dumps(var.attrs, sort_keys=True, default=str))
-        for name, var in sorted(dataset.variables.items(), key=lambda item: str(item[0]))
+        (name, dims, values.shape, values.dtype.kind, json.dumps(attrs, sort_keys=True, default=str))
+        for name, (dims, values, attrs) in sorted(variables.items())
     )
+
+
+def _parts(dataset: Any) -> tuple[dict[str, Any], set[str], dict[str, Any]]:
+    """``(variables: name -> (dims, values, attrs), coordinate names, global attributes)`` of either kind."""
+    from ..core.netcdf_writer import DatasetContent
+
+    if isinstance(dataset, DatasetContent):
+        table = {**dataset.data_vars, **dataset.coords}
+        variables = {str(k): (tuple(d), np.asarray(v), a) for k, (d, v, a) in table.items()}
+        return variables, set(dataset.coords), dict(dataset.attrs)
+    variables = {str(k): (tuple(v.dims), v.values, dict(v.attrs)) for k, v in dataset.variables.items()}
+    return variables, {str(c) for c in dataset.coords}, dict(dataset.attrs)
 
 
 def is_stacked(dataset: Any) -> bool:
@@ -55,49 +73,54 @@ def is_stacked(dataset: Any) -> bool:
     return _META in dataset.attrs
 
 
-def stack_tasks(datasets: list[Any], indices: list[int], task_ids: list[str]) -> Any:
+def stack_tasks(datasets: list[Any], indices: list[int], task_ids: list[str]) -> DatasetContent:
     """Stack equally shaped ``solution.nc`` datasets (same :func:`shape_key`) along ``task``.
 
     Parameters
     ----------
-    datasets : list of xarray.Dataset
-        One per task, as :meth:`mobisense.ocp.solution.Solution.to_dataset` returns them.
+    datasets : list of DatasetContent or xarray.Dataset
+        One per task, as :meth:`mobisense.ocp.solution.Solution.to_content` (or ``to_dataset``) returns them.
     indices : list of int
         The tasks' indices in the sweep (the ``task`` coordinate).
     task_ids : list of str
         The tasks' problem hashes (``task_id``).
-    """
-    import xarray as xr
 
-    first = datasets[0]
-    if any(shape_key(ds) != shape_key(first) for ds in datasets[1:]):
+    Returns
+    -------
+    DatasetContent
+        The stacked file's content (``.to_xarray()`` for a Dataset); built without importing xarray.
+    """
+    from ..core.netcdf_writer import DatasetContent
+
+    parts = [_parts(ds) for ds in datasets]
+    first, coord_names, _ = parts[0]
+    if any(shape_key(ds) != shape_key(datasets[0]) for ds in datasets[1:]):
         raise ValueError("stack_tasks: the datasets differ in their variables or shapes")
-    data: dict[str, Any] = {}
+    index_dims = {name for name, (dims, _, _) in first.items() if dims == (name,)}
+    out = DatasetContent()
     index_attrs = {"long_name": "index of the task in the sweep", "units": "1"}
-    coords: dict[str, Any] = {TASK_DIM: ((TASK_DIM,), np.asarray(indices, np.int64), index_attrs)}
+    out.add_coord(TASK_DIM, (TASK_DIM,), np.asarray(indices, np.int64), index_attrs)
     coordinates, renamed = [], []
-    for name, var in first.variables.items():
-        name = str(name)
-        values = [ds.variables[name].values for ds in datasets]
-        is_coord = name in first.coords
+    for name, (dims, _, attrs) in first.items():
+        values = [variables[name][1] for variables, _, _ in parts]
+        is_coord = name in coord_names
         if is_coord and all(np.array_equal(values[0], v) for v in values[1:]):
-            coords[name] = (var.dims, values[0], dict(var.attrs))  # shared by every task
+            out.add_coord(name, dims, values[0], attrs)  # shared by every task
             continue
-        stacked = ((TASK_DIM, *var.dims), np.stack(values), dict(var.attrs))
         if is_coord:
             coordinates.append(name)
-        if name in first.dims:  # an index coordinate cannot have two dimensions: renamed
+        if name in index_dims:  # an index coordinate cannot have two dimensions: renamed
             renamed.append(name)
-            data[name + _OF_TASK] = stacked
+            out.add_variable(name + _OF_TASK, (TASK_DIM, *dims), np.stack(values), attrs)
         else:
-            data[name] = stacked
-    data["task_id"] = ((TASK_DIM,), np.asarray(task_ids, dtype=str), {"long_name": "problem hash of the task"})
-    text = [json.dumps({k: _plain(v) for k, v in ds.attrs.items()}) for ds in datasets]
+            out.add_variable(name, (TASK_DIM, *dims), np.stack(values), attrs)
+    out.add_variable("task_id", (TASK_DIM,), np.asarray(task_ids, dtype=str), {"long_name": "problem hash of the task"})
+    text = [json.dumps({k: _plain(v) for k, v in attrs.items()}) for _, _, attrs in parts]
     described = {"long_name": "global attributes of the task's solution.nc (JSON)"}
-    data["task_attrs"] = ((TASK_DIM,), np.asarray(text, dtype=str), described)
+    out.add_variable("task_attrs", (TASK_DIM,), np.asarray(text, dtype=str), described)
     meta = {"coordinates": coordinates, "renamed": renamed}
-    attrs = {"title": f"mobisense: solutions of {len(datasets)} sweep tasks", _META: json.dumps(meta)}
-    return xr.Dataset(data, coords=coords, attrs=attrs)
+    out.attrs.update({"title": f"mobisense: solutions of {len(datasets)} sweep tasks", _META: json.dumps(meta)})
+    return out
 
 
 def task_dataset(stacked: Any, index: int) -> Any:
@@ -152,7 +175,10 @@ def write_task_files(folder: Path, rows: list[dict[str, Any]], datasets: list[An
         name = f"part-{number:06d}.nc"
         stacked = stack_tasks([datasets[k] for k in members], [int(rows[k]["index"]) for k in members],
                               [str(rows[k]["task"]) for k in members])  # fmt: skip
-        write_netcdf(folder / name, stacked)
+        try:  # numbers and string indices: written without xarray
+            write_netcdf(folder / name, stacked)
+        except TypeError:  # strings stacked along task (task_id, task_attrs, a label that varies): through xarray
+            write_netcdf(folder / name, stacked.to_xarray())
         for k in members:
             rows[k]["solution_file"] = f"{TASKS}/{name}"
 

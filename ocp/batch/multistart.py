@@ -48,7 +48,7 @@ def solve_multistart(
 
     def on_result(i: int, result: dict[str, Any]) -> None:
         if "dataset" in result:
-            solutions[i] = Solution.from_dataset(result["dataset"])
+            solutions[i] = Solution.from_dataset(result["dataset"].to_xarray())
         else:
             errors.append(f"start {i}: {result['row'].get('error', '')}")
 

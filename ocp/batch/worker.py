@@ -49,7 +49,8 @@ def solve_task(payload: dict[str, Any]) -> dict[str, Any]:
         "start": StartKind(solution.stats.get("start", StartKind.CONTINUATION)).value,
         "transcription_cached": cached,
     }
-    return {"row": row, "dataset": solution.to_dataset(), "nlp": solution.nlp if solution.success else None}
+    # the solution.nc content as numpy arrays (no xarray on the worker; cheaper to pickle than a Dataset)
+    return {"row": row, "dataset": solution.to_content(), "nlp": solution.nlp if solution.success else None}
 
 
 def worker_name() -> str:

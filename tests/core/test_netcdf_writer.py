@@ -10,6 +10,7 @@ scales, which differ by address only). ``history`` holds the clock time, so it i
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -101,10 +102,10 @@ def test_labels_read_back_as_index_coordinates(tmp_path):
 
 
 def test_what_the_writer_does_not_support_is_a_clear_error(tmp_path):
-    strings = DatasetContent()
-    strings.add_variable("names", ("k",), ["a", "b"], {})
-    with pytest.raises(TypeError, match="data variable 'names': values of type <U1"):
-        write_content(tmp_path / "a.nc", strings)
+    flags = DatasetContent()
+    flags.add_variable("flags", ("k",), [True, False], {})
+    with pytest.raises(TypeError, match="data variable 'flags': values of type bool"):
+        write_content(tmp_path / "a.nc", flags)
     sizes = DatasetContent()
     sizes.add_variable("a", ("k",), [1.0, 2.0], {})
     sizes.add_variable("b", ("k",), [1.0, 2.0, 3.0], {})
@@ -150,3 +151,17 @@ def test_a_field_solution_file_is_the_file_xarray_writes(full_sigma, tmp_path, m
     ds = assert_same_file(solution.to_content(), tmp_path, monkeypatch)
     assert ds["sigma_diag"].encoding["coordinates"] == "state_x state_y"
     assert ("Sigma" in ds) == full_sigma
+
+
+def test_text_variables_and_a_stacked_sweep_file_are_written_as_xarray_writes_them(tmp_path, monkeypatch):
+    # a sweep's part file: per-task problem hashes and JSON attributes (text along ``task``), stacked solutions
+    from mobisense.ocp.task_files import stack_tasks
+
+    one = _synthetic()
+    other = _synthetic()
+    other.attrs = {**other.attrs, "title": "another — ü"}
+    stacked = stack_tasks([one, other], [4, 9], ["a1b2", "c3d4e5"])
+    assert stacked.data_vars["task_attrs"][1].dtype.kind == "U"
+    ds = assert_same_file(stacked, tmp_path, monkeypatch)
+    assert list(ds["task_id"].values) == ["a1b2", "c3d4e5"]
+    assert json.loads(str(ds["task_attrs"].values[1]))["title"] == "another — ü"
