@@ -13,8 +13,10 @@ coasting trajectory as the guess. Every comparison is a ratio of interleaved run
     same optimum: the reference solves cold to 1e-10; its optimum is packed into mobisense's NLP, which
     re-solves from there; |J − J_ref| / J_ref. Target ≤ 1e-8.
 ``build``
-    transcription build (constructor + creating the first Ipopt instance, not its iterations), each in a fresh process
-    with the kernel cache on disk warm. Targets ≤ 0.3 s (n = N = 1, K ≤ 800), ≤ 1.5 s (n = 4, N = 2).
+    transcription build (constructor + creating the first Ipopt instance, not its iterations), each in a fresh process,
+    with the kernel cache on disk warm, then cold (a fresh cache folder: ``solver.codegen: auto`` evaluates the
+    kernels in the virtual machine and compiles them in the background). Targets ≤ 0.3 s (n = N = 1, K ≤ 800),
+    ≤ 1.5 s (n = 4, N = 2), both ways.
 ``command``
     whole-process wall time of ``mobisense solve problems/hussein2008.yaml --no-plot`` (target ≤ 0.8 ×
     the reference script's), with figures (≤ 1.2 ×), ``mobisense --help`` and ``validate`` (< 0.3 s).
@@ -163,13 +165,30 @@ def build(sizes: list[tuple[int, int]], Ks: list[int], repeats: int) -> bool:
         ok &= good
         target = "–" if limit is None else f"≤ {limit} s {verdict(good)}"
         print(f"| {n}, {N} | " + " | ".join(f"{t:.3f} s" for t in row) + f" | {target} |")
-    print(f"build time within its targets at every K: {verdict(ok)}")
-    return ok
+    print(f"build time within its targets at every K (warm cache): {verdict(ok)}")
+    # cold cache: a fresh cache folder per process, once each (a miss starts a background compile, which is
+    # left to finish or fail on its own: these runs come last)
+    print("\n## build time with a COLD kernel cache (fresh cache folder, first run), one process each")
+    print("| n, N | " + " | ".join(f"K = {K}" for K in Ks) + " | target |")
+    print("| --- | " + " | ".join("---" for _ in Ks) + " | --- |")
+    ok_cold = True
+    for n, N in sizes:
+        with tempfile.TemporaryDirectory() as fresh:
+            row = [_run_build(n, N, K, cache=f"{fresh}/K{K}") for K in Ks]
+        limit = limits.get((n, N))
+        good = limit is None or max(t for t, _ in row) <= limit
+        ok_cold &= good
+        target = "–" if limit is None else f"≤ {limit} s {verdict(good)}"
+        print(f"| {n}, {N} | " + " | ".join(f"{t:.3f} s" for t, _ in row) + f" | {target} |")
+        print(f"(n = {n}, N = {N}, cold cache: kernels {row[0][1]})")
+    print(f"build time within its targets at every K (cold cache): {verdict(ok_cold)}")
+    return ok and ok_cold
 
 
-def _run_build(n: int, N: int, K: int) -> tuple[float, str]:
+def _run_build(n: int, N: int, K: int, cache: str | None = None) -> tuple[float, str]:
     code = BUILD_SCRIPT.format(here=str(HERE), n=n, N=N, K=K)
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    env = None if cache is None else {**os.environ, "MOBISENSE_CACHE": cache}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env).stdout
     seconds, mode = out.strip().split(" ", 1)
     return float(seconds), mode
 

@@ -35,9 +35,9 @@ class HomotopyOptions(StrictModel):
     ``step`` ≥ 10⁻⁴ (at most 10⁴ fixed steps); ``adaptive`` halves a failed step down to ``min_step`` ≥ 10⁻⁶
     and makes at most :data:`mobisense.ocp.homotopy.MAX_ATTEMPTS` attempts.
 
-    ``budget``: the direct method's continuation may take at most ``budget`` × the Ipopt iterations of the
-    cold ε = 1 solve; beyond that it is stopped and the cold solve is kept (docs/theory/direct.md §5.6;
-    ``null``: no limit, and strategy ``homotopy`` runs no cold solve).
+    ``budget``: the direct method's continuation (strategies ``homotopy`` and ``thorough``) may take at most
+    ``budget`` × the Ipopt iterations of the cold ε = 1 solve; beyond that it is stopped and the cold solve is
+    kept (docs/theory/direct.md §5.6; ``null``: no limit, and strategy ``homotopy`` runs no cold solve).
     """
 
     mode: HomotopyModeName = "fixed"
@@ -90,12 +90,20 @@ class SolverOptions(StrictModel):
     strategy: StrategyName = Field(
         "auto", description="direct method: which starts to solve and which optimum to keep (direct.md §5.6)"
     )
-    starts: int = Field(4, ge=1, le=1000, description="random starts of strategies auto and thorough")
+    starts: int = Field(4, ge=1, le=1000, description="random starts of strategy thorough; at most these in auto")
+    consensus: int = Field(
+        3,
+        ge=1,
+        le=1001,
+        description="strategy auto stops drawing random starts once this many starts reach the lowest cost",
+    )
     agreement: float = Field(
         1e-6, gt=0.0, lt=1.0, description="relative cost difference under which two optima count as one"
     )
     codegen: Literal["auto", "on", "off"] = Field(
-        "auto", description="compile the collocation kernels with the C compiler (cached on disk)"
+        "auto",
+        description="compile the collocation kernels with the C compiler, cached on disk (auto: in the background "
+        "on a cache miss, this run uses the virtual machine; on: wait for the compiler)",
     )
     collocation: CollocationOptions = CollocationOptions()
     shooting: ShootingOptions = ShootingOptions()
@@ -103,6 +111,4 @@ class SolverOptions(StrictModel):
     bvp: BVPOptions = BVPOptions()
     tolerance: float = Field(1e-9, gt=0.0, lt=1e-2, description="Ipopt tol (scaled NLP error)")
     max_iterations: int = Field(500, ge=1, le=1_000_000)
-    time_limit: float | None = Field(
-        None, gt=0.0, le=1e9, description="wall-clock limit of each Ipopt solve (s)"
-    )
+    time_limit: float | None = Field(None, gt=0.0, le=1e9, description="wall-clock limit of each Ipopt solve (s)")

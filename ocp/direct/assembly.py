@@ -158,9 +158,7 @@ def assemble(k: IntervalKernels, functions: dict[str, ca.Function], maps: IndexM
     sp_J = _ccs(ng, nw, R[source][order], C[source][order])
     nonzeros = ca.vertcat(_nonzeros(jac_local), _nonzeros(jac_T))
     jac = ca.sparsity_cast(nonzeros[source[order].tolist()], sp_J)
-    jac_g = ca.Function(
-        "jac_g", [w, P], [ca.vertcat(ca.vec(rows_j), term_j), jac], ["x", "p"], ["g", "jac_g_x"]
-    )
+    jac_g = ca.Function("jac_g", [w, P], [ca.vertcat(ca.vec(rows_j), term_j), jac], ["x", "p"], ["g", "jac_g_x"])
 
     # Hessian (upper triangle): the local upper triangles summed into the global one
     hr, hc = (np.array(v, dtype=int) for v in functions["k_hess"].sparsity_out(0).get_triplet())

@@ -13,6 +13,13 @@ removed after compiling). The C compiler is ``$CC`` if set, else the first of ``
 the ``PATH``. Without a compiler, with an unwritable cache folder or when compiling fails, the functions
 are returned unchanged (virtual machine) and the reason is reported: the result is the same, only slower.
 A library whose functions do not have the expected inputs and outputs (a stale or damaged file) is rebuilt.
+
+With ``background=True`` (``solver.codegen: auto``) a miss does not wait for the compiler — generating and
+compiling the kernels of n = 4, N = 2 takes 12–45 s, far more than the solve: the functions are saved
+(CasADi serialisation, milliseconds) and a detached process (``python -m mobisense.ocp.direct.kernel_cache``)
+generates and compiles them into the cache, while this process evaluates them in the virtual machine
+(the same numbers, ≈ 2× slower evaluations); the next process with the same key loads the library. A
+marker file keeps concurrent processes from compiling the same key twice (stale after 10 minutes).
 """
 
 from __future__ import annotations
@@ -23,16 +30,28 @@ import json
 import os
 import shutil
 import subprocess
+import sys
+import time
 from pathlib import Path
 
 import casadi as ca
 
-__all__ = ["CACHE_ENV", "COMPILE_FLAGS", "cache_folder", "c_compiler", "source_digest", "load_compiled"]
+__all__ = [
+    "CACHE_ENV",
+    "COMPILE_FLAGS",
+    "cache_folder",
+    "c_compiler",
+    "source_digest",
+    "load_compiled",
+    "compile_library",
+]
 
 #: environment variable naming the cache folder
 CACHE_ENV = "MOBISENSE_CACHE"
 #: compiler flags (``-O1``: measured fastest to build at equal run time; ``-O2`` compiles 8x longer)
 COMPILE_FLAGS: tuple[str, ...] = ("-O1", "-fPIC", "-shared")
+#: a background compile marker older than this (s) is taken as the trace of a killed compile
+STALE_MARKER_S = 600.0
 
 
 def cache_folder() -> Path:
@@ -89,7 +108,7 @@ def _load(library: Path, functions: dict[str, ca.Function]) -> dict[str, ca.Func
 
 
 def load_compiled(
-    functions: dict[str, ca.Function], key: str, folder: Path | None = None
+    functions: dict[str, ca.Function], key: str, folder: Path | None = None, background: bool = False
 ) -> tuple[dict[str, ca.Function], str]:
     """Compiled versions of ``functions`` from the cache (built on a miss), or the functions themselves.
 
@@ -101,6 +120,8 @@ def load_compiled(
         What identifies the functions (see module docstring); the compiler and flags are added here.
     folder : Path, optional
         Cache folder (default :func:`cache_folder`).
+    background : bool
+        On a miss, compile in a detached process and return the functions themselves (see module docstring).
 
     Returns
     -------
@@ -119,29 +140,91 @@ def load_compiled(
     loaded = _load(library, functions)
     if loaded is not None:
         return loaded, "compiled (cached)"
+    if background:
+        return functions, _start_background(functions, folder, digest, full_key, compiler)
     try:
         folder.mkdir(parents=True, exist_ok=True)
         source = folder / f".kernels_{digest}.{os.getpid()}.c"
-        target = folder / f".kernels_{digest}.{os.getpid()}.so"
         generator = ca.CodeGenerator(f"kernels_{digest}.c", {"with_header": False})
         for f in functions.values():
             generator.add(f)
         source.write_text(generator.dump(), encoding="utf-8")
     except OSError as err:
         return functions, f"virtual machine (cache folder {folder} not writable: {err.strerror})"
+    failure = _compile(source, library, full_key, compiler)
+    if failure is not None:
+        return functions, f"virtual machine ({failure})"
+    loaded = _load(library, functions)
+    if loaded is None:
+        return functions, "virtual machine (the compiled library could not be loaded)"
+    return loaded, "compiled"
+
+
+def _compile(source: Path, library: Path, full_key: str, compiler: str) -> str | None:
+    """Compile ``source`` into ``library`` (atomically) and record its key; None, or why it failed."""
+    target = library.with_name(f".{library.stem}.{os.getpid()}.so")
     try:
         run = subprocess.run(
             [compiler, *COMPILE_FLAGS, str(source), "-o", str(target), "-lm"], capture_output=True, text=True
         )
         if run.returncode != 0:
-            first = (run.stderr.strip().splitlines() or ["no message"])[0]
-            return functions, f"virtual machine (compiling failed: {first})"
+            return "compiling failed: " + (run.stderr.strip().splitlines() or ["no message"])[0]
         os.replace(target, library)  # atomic: a concurrent run sees the old library or the new one, never half
-        (folder / f"kernels_{digest}.json").write_text(json.dumps({"key": full_key}, indent=1), encoding="utf-8")
+        library.with_suffix(".json").write_text(json.dumps({"key": full_key}, indent=1), encoding="utf-8")
+    except OSError as err:
+        return f"cache folder {library.parent} not writable: {err.strerror}"
     finally:
         for path in (source, target):
             path.unlink(missing_ok=True)
-    loaded = _load(library, functions)
-    if loaded is None:
-        return functions, "virtual machine (the compiled library could not be loaded)"
-    return loaded, "compiled"
+    return None
+
+
+def _start_background(
+    functions: dict[str, ca.Function], folder: Path, digest: str, full_key: str, compiler: str
+) -> str:
+    """Save ``functions`` and start a detached compile of them (unless one runs); say so."""
+    marker = folder / f".kernels_{digest}.building"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        if marker.exists() and time.time() - marker.stat().st_mtime < STALE_MARKER_S:
+            return "virtual machine (kernels being compiled by another process)"
+        marker.write_text(str(os.getpid()), encoding="utf-8")
+        saved = []
+        for name, f in functions.items():
+            path = folder / f".kernels_{digest}.{os.getpid()}.{name}.casadi"
+            f.save(str(path))
+            saved.append(str(path))
+    except (OSError, RuntimeError) as err:
+        return f"virtual machine (cache folder {folder} not writable: {err})"
+    args = [sys.executable, "-m", __name__, str(folder / f"kernels_{digest}.so"), full_key, compiler, *saved]
+    subprocess.Popen(
+        args, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+    )
+    return "virtual machine (compiling in the background for the next run)"
+
+
+def compile_library(library: Path, full_key: str, compiler: str, saved: list[Path]) -> str | None:
+    """Generate C for the saved functions (``Function.save`` files, removed) and compile ``library``.
+
+    The work of a background compile (:func:`load_compiled` with ``background=True``); returns None or why
+    it failed. The ``.building`` marker of the library is removed in any case.
+    """
+    library = Path(library)
+    marker = library.with_name(f".{library.stem}.building")
+    try:
+        generator = ca.CodeGenerator(f"{library.stem}.c", {"with_header": False})
+        for path in saved:
+            generator.add(ca.Function.load(str(path)))
+        source = library.with_name(f".{library.stem}.{os.getpid()}.c")
+        source.write_text(generator.dump(), encoding="utf-8")
+        return _compile(source, library, full_key, compiler)
+    except (OSError, RuntimeError) as err:
+        return str(err)
+    finally:
+        for path in [*saved, marker]:
+            Path(path).unlink(missing_ok=True)
+
+
+if __name__ == "__main__":  # the detached background compile: library, key, compiler, saved functions
+    failure = compile_library(Path(sys.argv[1]), sys.argv[2], sys.argv[3], [Path(p) for p in sys.argv[4:]])
+    sys.exit(0 if failure is None else 1)

@@ -243,8 +243,10 @@ class IntervalKernels:
         """A cheap summary of the generated functions (sizes and instruction counts), part of the cache key."""
         parts = []
         for name, f in sorted(self.functions.items()):
-            sp = ",".join(f"{f.nnz_in(i)}" for i in range(f.n_in())) + "/" + ",".join(
-                f"{f.nnz_out(i)}" for i in range(f.n_out())
+            sp = (
+                ",".join(f"{f.nnz_in(i)}" for i in range(f.n_in()))
+                + "/"
+                + ",".join(f"{f.nnz_out(i)}" for i in range(f.n_out()))
             )
             parts.append(f"{name}:{sp}:{f.n_instructions()}")
         return ";".join(parts)

@@ -58,7 +58,10 @@ IPOPT_DEFAULTS: dict[str, Any] = {
     "sb": "yes",
 }
 
-#: Extra options of a cold solve (from the coasting guess).
+#: Extra options of a cold solve (from the coasting guess or a random start). Not adopted, measured on the 24
+#: problems of benchmarks/bench_ocp_quality.py (benchmarks/RESULTS.md): ``obj_scaling_factor`` 100 cuts the cold
+#: iterations by 30 % (median ÷ reference 1.12 → 0.92) but moves the cold and random starts to other local
+#: optima, and strategy ``auto`` then misses the best optimum found by the candidates on 2 of the first 3.
 COLD_START: dict[str, Any] = {"mu_init": 1e-2}
 
 #: Extra options of warm-started solves (primal and dual variables supplied).
@@ -72,7 +75,8 @@ WARM_START: dict[str, Any] = {
     "warm_start_mult_bound_push": 1e-9,
 }
 
-#: ``solver.codegen``: compile the kernels ``on`` (always), ``off`` (never) or ``auto`` (when small)
+#: ``solver.codegen``: compile the kernels ``on`` (always, waiting for the compiler on a cache miss), ``off``
+#: (never) or ``auto`` (when small; a cache miss compiles in the background for the next run)
 CODEGEN_MODES = ("auto", "on", "off")
 #: ``auto`` compiles kernels up to this many SX instructions in all (n = 4, N = 4: 133 000, 12 s once)
 AUTO_COMPILE_INSTRUCTIONS = 250_000
@@ -112,7 +116,8 @@ class DirectCollocation:
     max_iterations : int
         Ipopt ``max_iter`` of each solve.
     codegen : {"auto", "on", "off"}
-        Compile the interval kernels (cached on disk; see :mod:`mobisense.ocp.direct.kernel_cache`).
+        Compile the interval kernels (cached on disk; ``auto`` compiles a cache miss in the background and
+        evaluates them in the virtual machine meanwhile; see :mod:`mobisense.ocp.direct.kernel_cache`).
     """
 
     def __init__(
@@ -162,7 +167,7 @@ class DirectCollocation:
         key = "|".join(
             [repr(self.structure), c.scheme, str(c.degree), self.kernels.layout, digest, self.kernels.fingerprint()]
         )
-        return load_compiled(functions, key)
+        return load_compiled(functions, key, background=codegen == "auto")
 
     @property
     def nlp(self) -> dict[str, ca.MX]:

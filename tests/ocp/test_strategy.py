@@ -1,0 +1,63 @@
+"""Solve strategies (docs/theory/direct.md §5.6) and the background kernel compile (§1.7)."""
+
+from __future__ import annotations
+
+import time
+
+import casadi as ca
+import numpy as np
+import pytest
+from reference_problems import hussein2008
+
+from mobisense.ocp.direct.kernel_cache import load_compiled
+from mobisense.ocp.direct.solver import solve_direct
+from mobisense.ocp.problem import Problem
+
+
+def costs_of(solution) -> list[float | None]:  # noqa: ANN001
+    return [s["cost"] for s in solution.stats["strategy"]["starts"]]
+
+
+def agreeing(costs: list[float | None], rtol: float) -> int:
+    solved = [c for c in costs if c is not None]
+    lowest = min(solved)
+    return sum(c <= lowest + rtol * abs(lowest) for c in solved)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("consensus", [1, 2, 3])
+def test_auto_draws_random_starts_until_consensus(consensus):
+    problem = Problem.from_dict(hussein2008(collocation={"intervals": 20}, consensus=consensus))
+    solution = solve_direct(problem)
+    costs = costs_of(solution)
+    labels = [s["start"] for s in solution.stats["strategy"]["starts"]]
+    rtol = problem.solver.agreement
+    assert labels == ["cold"] + [f"random start {k}" for k in range(1, len(labels))]
+    # stopped exactly when `consensus` starts reached the lowest cost, or after every random start
+    assert agreeing(costs, rtol) >= consensus or len(labels) == 1 + problem.solver.starts
+    assert len(labels) == 1 or agreeing(costs[:-1], rtol) < consensus
+    # the kept solution is the lowest cost found, its J recomputed from the reported trajectory
+    assert solution.cost == pytest.approx(min(c for c in costs if c is not None), rel=1e-9)
+
+
+@pytest.mark.slow
+def test_background_compile_serves_the_next_run(tmp_path):
+    # a cache miss with background=True answers at once with the virtual-machine functions; a detached process
+    # compiles them, after which the same key loads the library, whose values equal the SX function's
+    x = ca.SX.sym("x", 3)
+    functions = {"bg_kernel": ca.Function("bg_kernel", [x], [ca.sin(x) * x[0] + x[2] ** 2])}
+    t0 = time.perf_counter()
+    first, how = load_compiled(functions, "test key", tmp_path, background=True)
+    assert time.perf_counter() - t0 < 1.0  # nothing compiled in this process (a compile takes seconds)
+    assert first is functions and "background" in how
+    again, how_again = load_compiled(functions, "test key", tmp_path, background=True)
+    assert again is functions and "another process" in how_again  # no second compile of the same key
+    deadline = time.time() + 120
+    done = lambda: list(tmp_path.glob("kernels_*.so")) and not list(tmp_path.glob(".kernels_*"))  # noqa: E731
+    while not done() and time.time() < deadline:
+        time.sleep(0.2)
+    loaded, how = load_compiled(functions, "test key", tmp_path, background=True)
+    assert how == "compiled (cached)"
+    point = [0.3, -1.2, 2.0]
+    np.testing.assert_allclose(np.asarray(loaded["bg_kernel"](point)), np.asarray(functions["bg_kernel"](point)))
+    assert not list(tmp_path.glob(".kernels_*"))  # saved functions, source and marker removed
