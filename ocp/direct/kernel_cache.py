@@ -52,6 +52,10 @@ CACHE_ENV = "MOBISENSE_CACHE"
 COMPILE_FLAGS: tuple[str, ...] = ("-O1", "-fPIC", "-shared")
 #: a background compile marker older than this (s) is taken as the trace of a killed compile
 STALE_MARKER_S = 600.0
+#: background compiles allowed at once per cache folder: a miss beyond it runs in the virtual machine and
+#: leaves its compile to a later run (a test suite or sweep meeting many structures would otherwise start a
+#: C compiler for each, all at once)
+MAX_BACKGROUND_COMPILES = 1
 
 
 def cache_folder() -> Path:
@@ -188,6 +192,8 @@ def _start_background(
         folder.mkdir(parents=True, exist_ok=True)
         if marker.exists() and time.time() - marker.stat().st_mtime < STALE_MARKER_S:
             return "virtual machine (kernels being compiled by another process)"
+        if _compiles_running(folder) >= MAX_BACKGROUND_COMPILES:  # one compiler at a time on the machine
+            return "virtual machine (another background compile is running; these kernels wait for a later run)"
         marker.write_text(str(os.getpid()), encoding="utf-8")
         saved = []
         for name, f in functions.items():
@@ -201,6 +207,18 @@ def _start_background(
         args, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
     )
     return "virtual machine (compiling in the background for the next run)"
+
+
+def _compiles_running(folder: Path) -> int:
+    """How many background compiles into ``folder`` are under way (fresh ``.building`` markers)."""
+    now = time.time()
+    count = 0
+    for path in folder.glob(".kernels_*.building"):
+        try:
+            count += now - path.stat().st_mtime < STALE_MARKER_S
+        except OSError:  # finished meanwhile
+            pass
+    return count
 
 
 def compile_library(library: Path, full_key: str, compiler: str, saved: list[Path]) -> str | None:

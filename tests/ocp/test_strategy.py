@@ -52,6 +52,10 @@ def test_background_compile_serves_the_next_run(tmp_path):
     assert first is functions and "background" in how
     again, how_again = load_compiled(functions, "test key", tmp_path, background=True)
     assert again is functions and "another process" in how_again  # no second compile of the same key
+    other = {"bg_other": ca.Function("bg_other", [x], [ca.cos(x)])}
+    waiting, how_other = load_compiled(other, "another key", tmp_path, background=True)
+    assert waiting is other and "later run" in how_other  # one background compiler at a time
+    assert not list(tmp_path.glob(".kernels_*bg_other*"))  # nothing saved for the key left waiting
     deadline = time.time() + 120
     done = lambda: list(tmp_path.glob("kernels_*.so")) and not list(tmp_path.glob(".kernels_*"))  # noqa: E731
     while not done() and time.time() < deadline:
