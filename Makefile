@@ -21,7 +21,7 @@ demo: $(STAMP)  ## solve the default problem (problems/hussein2008.yaml) into ou
 
 test: $(STAMP)  ## ruff + the whole test suite (tests and notebooks) + the documentation site: what CI runs
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -m "not hostile_full"
+	$(BIN)/python -m pytest -m "not hostile_full" --durations=30
 	$(MAKE) docs
 
 test-fast: $(STAMP)  ## the edit-test loop: everything but notebooks and tests marked slow
