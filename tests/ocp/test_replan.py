@@ -1,4 +1,4 @@
-"""Re-planning (docs/theory/path_constraints.md §5): closed loop vs plan, open loop, no control; shrinking and receding."""
+"""Re-planning (docs/theory/path_constraints.md §5): closed loop vs plan, open loop, no control."""
 
 from __future__ import annotations
 
