@@ -1,9 +1,10 @@
 """Warm starts shifted in time: a solved window's primal–dual point moved onto another window's grid.
 
 Re-planning (docs/theory/path_constraints.md §5.2) re-solves the problem on ``[t, t_e]`` from a solution on
-``[t_prev, t_e,prev]``. The primal point is the previous solution's collocation polynomials evaluated on
-the new grid (:meth:`~mobisense.ocp.solution.Solution.sample`; held at its last value past its end, with
-zero control there). The multipliers are moved interval by interval: each new interval takes the
+``[t_prev, t_e,prev]``. The primal point is the previous solution's collocation polynomials (the Lagrange
+polynomials through each interval's nodes, evaluated from the NLP point itself) at the new grid's interval
+starts and nodes, held at their last value past the previous window's end, with zero control there. The multipliers are
+moved interval by interval: each new interval takes the
 physical multipliers (``μ = ν cost_scale / s_g``, eq. direct.8) of the previous interval containing its
 midpoint — the collocation and continuity multipliers approximate costates (eq. direct.6), functions of
 time, and the inequality rows' scale with the interval length, which the re-plans keep (their grids
@@ -24,6 +25,22 @@ __all__ = ["shifted_point"]
 def _per_interval_w(tr: DirectCollocation) -> np.ndarray:
     """Indices of ``w`` interval by interval (K, nz + nn) (the eliminated layout stores nothing else)."""
     return np.hstack([tr.maps.z, tr.maps.nxt])
+
+
+def _polynomials(
+    tr: DirectCollocation, w: np.ndarray, P: np.ndarray, window: tuple[float, float], times: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """States (T, nx) and controls (T, nu) of the NLP point ``w`` on ``window`` at ``times`` (clipped to it)."""
+    parts = tr.unpack(w, P)
+    K = tr.intervals
+    h = (window[1] - window[0]) / K
+    scaled = (np.clip(times, *window) - window[0]) / h
+    k = np.clip(np.ceil(scaled - 1e-9).astype(int) - 1, 0, K - 1)  # (t_k, t_k+1] belongs to interval k
+    s = scaled - k
+    nodes = np.concatenate([parts["xs"][:-1, None, :], parts["xc"]], axis=1)  # (K, d + 1, nx)
+    x = np.einsum("tj,tjx->tx", tr.colloc.interpolation_matrix(s, "all"), nodes[k])
+    u = np.einsum("tj,tjc->tc", tr.colloc.interpolation_matrix(s, "collocation"), parts["u"][k])
+    return x, u  # fmt: skip
 
 
 def _source_intervals(t_old: tuple[float, float], k_old: int, t_new: tuple[float, float], k_new: int) -> np.ndarray:
@@ -61,10 +78,8 @@ def shifted_point(
     # primal: the previous polynomials on the new interval starts and collocation nodes
     starts, nodes = tr_new.times(*window)
     times = np.concatenate([starts, nodes.ravel()])
-    sample = previous.sample(np.clip(times, *t_old))
-    x = previous.layout.join(sample.Sigma, sample.p, sample.v)
-    u = sample.u.reshape(len(times), -1)
-    u[times > t_old[1]] = 0.0
+    x, u = _polynomials(tr_old, np.asarray(nlp["w"], float), P_old, t_old, times)
+    u[times > t_old[1]] = 0.0  # past the previous window: its end state held (coasting on measured no better)
     K, d = tr_new.intervals, tr_new.colloc.degree
     w = tr_new.pack(x[: K + 1], x[K + 1 :].reshape(K, d, -1), u[K + 1 :].reshape(K, d, -1), P_new)
     # duals: physical multipliers of the old interval under each new interval's midpoint
