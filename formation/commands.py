@@ -156,12 +156,13 @@ def check_scenario(data: dict, path: Path, kind: str) -> str:
             f"{config.duration:g} {config.units.time}"
         )
     if kind == "replan":
-        from ..ocp.problem import load_problem
+        from .replay.replan import check_against_problem
 
-        load_problem(path.parent / config.problem)  # the problem it flies must be valid too
+        check_against_problem(config, path)  # the problem it flies must be valid, and the window within it
+        window = "" if config.replan.length is None else f" of length {config.replan.length:g}"
         return (
-            f"re-planning of {config.problem!r} every {config.replan.every:g} ({config.replan.horizon} horizon), "
-            f"{config.monte_carlo.runs} Monte Carlo runs"
+            f"re-planning of {config.problem!r} every {config.replan.every:g} ({config.replan.horizon} horizon"
+            f"{window}), {config.monte_carlo.runs} Monte Carlo runs"
         )
     if kind == "leader_follower":
         runs = ", ".join(f"{name} ({control})" for name, control, _, _ in config.resolved_runs())

@@ -20,6 +20,7 @@ MUST_BE_FINITE: dict[str, tuple[str, ...]] = {
     "distributed": ("sensor_position", "z_constrained"),
     "field_replay": ("r", "z_est"),
     "plan_replay": ("r", "nees_predicted"),
+    "replan": ("p", "Sigma"),
 }
 
 

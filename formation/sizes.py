@@ -128,6 +128,36 @@ def _plan_replay(config: Any, source: Path) -> list[Estimate]:
     return parts + [Estimate(what, 8.0 * floats, hint, mc.runs * steps * n * 0.5e-6)]
 
 
+def _replan(config: Any, source: Path) -> list[Estimate]:
+    """Flights (3 policies × runs × steps), the plans kept (runs × re-plans × samples) and the re-solves.
+
+    One transcription per window length is held (up to one per re-plan); each warm re-solve takes ≥ 2
+    Ipopt iterations (3–5 measured) at the per-non-zero cost of :mod:`mobisense.ocp.sizes`.
+    """
+    from ..ocp.direct.nlp_size import transcription_size
+    from ..ocp.model import Structure
+    from ..ocp.replan import PLAN_SAMPLES
+    from ..ocp.sizes import SECONDS_PER_NONZERO_ITERATION, direct_estimate
+    from .replay.replan import check_against_problem
+
+    problem = check_against_problem(config, source)
+    span, mc, every = problem.horizon.tf - problem.horizon.t0, config.monte_carlo, config.replan.every
+    steps = _steps(span, mc.time_step)
+    replans = min(int(math.ceil(span / every)), steps)
+    n, N, runs = problem.n, problem.N, mc.runs
+    floats = runs * (steps * (2 * N + n * n) + (replans + 1) * PLAN_SAMPLES * (2 * N + 1))
+    hint = "use fewer monte_carlo.runs, a larger monte_carlo.time_step or a larger replan.every"
+    what = f"{runs} runs × {steps:.3g} steps × {replans} re-plans (horizon / time_step, horizon / every)"
+    flights = Estimate(what, _COPIES * 8.0 * floats, hint, 3 * runs * steps * 30e-6)
+    c = problem.solver.collocation
+    size = transcription_size(Structure.of(problem), c.degree, c.intervals, c.scheme)
+    solve_seconds = 2 * (size.jacobian_nnz + size.hessian_nnz) * SECONDS_PER_NONZERO_ITERATION
+    held = direct_estimate(problem)
+    solves = Estimate(f"{runs * replans:.3g} re-solves of {held.what}", min(replans, c.intervals) * held.bytes,
+                      hint, held.seconds + runs * replans * solve_seconds)  # fmt: skip
+    return [flights, solves]
+
+
 def scenario_estimates(kind: str, config: Any, source: Path) -> list[Estimate]:
     """Memory and time of simulating a validated scenario of ``kind`` (see ``formation.scenarios.SCENARIO_KINDS``).
 
@@ -144,4 +174,6 @@ def scenario_estimates(kind: str, config: Any, source: Path) -> list[Estimate]:
         return _field_replay(config, source)
     if kind == "plan_replay":
         return _plan_replay(config, source)
+    if kind == "replan":
+        return _replan(config, source)
     return []

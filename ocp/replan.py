@@ -1,17 +1,17 @@
-"""Shrinking-horizon re-planning under a current and force noise (docs/theory/path_constraints.md §5).
+"""Re-planning under a current and force noise: shrinking or receding horizon (docs/theory/path_constraints.md §5).
 
 The platforms fly ``p' = v + c``, ``v' = u + w`` (a constant current ``c`` the plan does not know, white
 force noise ``w`` of standard deviation ``force_noise_std`` per axis, Euler–Maruyama with ``time_step``);
 the filter's covariance follows the Riccati equation along the *flown* positions. Open loop flies the
-first plan's control; closed loop re-solves the problem every ``every`` time units from the measured
-state and the filter's current Σ over the remaining horizon, warm-started from the previous solution
-(same number of intervals, primal–dual point re-scaled, :func:`~mobisense.ocp.direct.solver.solve_direct`);
-no control flies ``u = 0``. The realised cost is ``Tr[M Σ(tf)] + ∫ (α/2|u|² + Tr[KΣ]) dt``.
+first plan's control (past a receding plan's window: u = 0); closed loop re-solves the problem every
+``every`` time units from the measured state and the filter's current Σ over the window of
+:class:`~mobisense.ocp.replan_window.Replanner` (shrinking ``[t, tf]`` or receding ``[t, min(t + L, tf)]``),
+warm-started from the previous plan shifted onto the new grid; no control flies ``u = 0``. The realised
+cost is ``Tr[M Σ(tf)] + ∫ (α/2|u|² + Tr[KΣ]) dt``.
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -19,6 +19,7 @@ import numpy as np
 
 from .model import SensorKalmanModel, Structure
 from .problem import Problem
+from .replan_window import Replanner, ReplanRecord
 
 __all__ = ["Disturbance", "FlightResult", "fly", "replan_monte_carlo"]
 
@@ -33,24 +34,31 @@ class Disturbance:
 
 @dataclass
 class FlightResult:
-    """One flight: times (T,), positions (T, N, 2), Σ (T, n, n), realised cost, plans made, re-solve times."""
+    """One flight: times (T,), positions (T, N, 2), Σ (T, n, n), realised cost, plans made, re-solves.
+
+    ``plans``: (instant, times (S,), positions (S, N, 2)) of each plan, sampled at ``PLAN_SAMPLES`` points.
+    """
 
     t: np.ndarray
     p: np.ndarray
     Sigma: np.ndarray
     cost: float
-    plans: list[tuple[float, np.ndarray]] = field(default_factory=list)
-    solve_times: list[float] = field(default_factory=list)
+    plans: list[tuple[float, np.ndarray, np.ndarray]] = field(default_factory=list)
+    records: list[ReplanRecord] = field(default_factory=list)
+
+    @property
+    def solve_times(self) -> list[float]:
+        """Wall time of each re-solve (s)."""
+        return [r.time_s for r in self.records]
 
 
-def _sub_problem(problem: Problem, t: float, p: np.ndarray, v: np.ndarray, Sigma: np.ndarray) -> Problem:
-    data = problem.normalised()
-    data["horizon"]["t0"] = float(t)
-    data["process"]["Sigma0"] = (0.5 * (Sigma + Sigma.T)).tolist()
-    for i, sensor in enumerate(data["sensors"]):
-        sensor["p0"], sensor["v0"] = p[i].tolist(), v[i].tolist()
-    data["solver"]["strategy"] = "cold"
-    return Problem.from_dict(data, source="<re-plan>")
+#: points at which each plan is stored (uniform over its window)
+PLAN_SAMPLES = 101
+
+
+def _plan_record(t: float, plan: Any) -> tuple[float, np.ndarray, np.ndarray]:
+    times = np.linspace(float(plan.t[0]), float(plan.t[-1]), PLAN_SAMPLES)
+    return t, times, plan.sample(times).p
 
 
 def fly(
@@ -61,13 +69,15 @@ def fly(
     time_step: float,
     every: float | None = None,
     control: bool = True,
+    replanner: Replanner | None = None,
 ) -> FlightResult:
     """Fly ``plan`` (a direct :class:`~mobisense.ocp.solution.Solution`) under ``disturbance``.
 
-    ``every``: re-plan period (None: open loop); ``control=False`` flies u = 0.
+    ``every``: re-plan period (None: open loop) with ``replanner`` (default: shrinking horizon, shifted warm
+    starts); ``control=False`` flies u = 0.
     """
-    from .direct.solver import solve_direct
-
+    if every is not None and replanner is None:
+        replanner = Replanner(problem)
     model = SensorKalmanModel(Structure.of(problem))
     values = model.layout.values(problem)
     P = model.layout.pack(values)
@@ -82,15 +92,19 @@ def fly(
     Sigma = mats["Sigma0"].copy()
     drift = np.asarray(disturbance.drift, float)
     result = FlightResult(np.empty(steps + 1), np.empty((steps + 1, N, 2)), np.empty((steps + 1, n, n)), 0.0)
-    result.plans.append((t0, plan.p.copy()))
+    result.plans.append(_plan_record(t0, plan))
     next_replan = t0 + every if every else np.inf
     running = 0.0
     grid = t0 + dt * np.arange(steps + 1)
 
     def controls(solution: Any, j: int) -> np.ndarray:
-        """The plan's control at the grid times from step j on (sampled once per plan), (T - j, N, 2)."""
-        times = np.clip(grid[j:], solution.t[0], solution.t[-1])
-        return solution.sample(times).u if control else np.zeros((len(times), N, 2))
+        """The plan's control at the grid times from step j on (sampled once per plan; 0 past its end), (T-j, N, 2)."""
+        times = grid[j:]
+        if not control:
+            return np.zeros((len(times), N, 2))
+        u = solution.sample(np.clip(times, solution.t[0], solution.t[-1])).u
+        u[times > solution.t[-1] + 1e-9 * (tf - t0)] = 0.0
+        return u
 
     u_plan, j_plan = controls(plan, 0), 0
 
@@ -103,14 +117,12 @@ def fly(
         result.t[j], result.p[j], result.Sigma[j] = t, p, Sigma
         if j == steps:
             break
-        if t >= next_replan - 1e-9 and tf - t > 2 * dt:
-            sub = _sub_problem(problem, t, p, v, Sigma)
-            start = time.perf_counter()
-            new = solve_direct(sub, init=plan)
-            result.solve_times.append(time.perf_counter() - start)
+        if replanner is not None and t >= next_replan - 1e-9 and tf - t > 2 * dt:
+            new = replanner.solve(plan, t, p, v, Sigma)
+            result.records.append(replanner.records[-1])
             if new.success:
                 plan = new
-                result.plans.append((t, new.p.copy()))
+                result.plans.append(_plan_record(t, new))
                 u_plan, j_plan = controls(plan, j), j
             next_replan += every  # type: ignore[operator]
         u = u_plan[j - j_plan]
@@ -135,35 +147,57 @@ def replan_monte_carlo(
     every: float,
     time_step: float,
     seed: int = 1,
+    length: float | None = None,
+    warm_start: str = "shifted",
+    progress: Any = None,
 ) -> dict[str, Any]:
     """Closed loop vs open loop vs no control over ``runs`` flights with the same noise draws.
+
+    Parameters
+    ----------
+    length : float, optional
+        Receding-horizon length L (T); None: shrinking horizon.
+    warm_start : {"shifted", "reused", "cold"}
+        How each re-solve starts (:mod:`mobisense.ocp.replan_window`).
+    progress : callable, optional
+        Called with the number of runs done after each run.
 
     Returns
     -------
     dict
         ``closed_loop``, ``open_loop``, ``no_control``: ``{cost_mean, cost_std, cost_stderr}``;
-        ``replan_solve_time_s``: ``{median, max}``; ``replan_every_s``; ``plan_cost``; ``flights`` (closed loop).
+        ``replan_solve_time_s``: ``{median, max}``; ``replan_iterations``: ``{median, max}``;
+        ``replan_every_s``; ``horizon``; ``plan_cost`` (the full-horizon plan's optimal cost); ``flights``
+        (closed loop).
+
+    The open loop flies the full-horizon plan whatever the horizon of the closed loop: it is what would be
+    flown without re-planning, and for a receding horizon the benchmark the windows are measured against.
     """
     from .direct.solver import solve_direct
 
-    plan = solve_direct(problem)
-    if not plan.success:
-        raise RuntimeError(f"the first plan failed: {plan.message}")
+    replanner = Replanner(problem, length, warm_start)  # type: ignore[arg-type]
+    h = problem.horizon
+    build_time = replanner.prepare(np.arange(h.t0 + every, h.tf - 2 * time_step, every))
+    full = solve_direct(problem)
+    plan = full if replanner.window(h.t0)[0] >= h.tf else replanner.first_plan()
+    for what, solution in (("the full-horizon plan", full), ("the first window's plan", plan)):
+        if not solution.success:
+            raise RuntimeError(f"{what} failed: {solution.message}")
     costs: dict[str, list[float]] = {"closed_loop": [], "open_loop": [], "no_control": []}
-    times: list[float] = []
     flights = []
     for r in range(runs):
         for name, kwargs in (
-            ("closed_loop", {"every": every}),
+            ("closed_loop", {"every": every, "replanner": replanner}),
             ("open_loop", {}),
             ("no_control", {"control": False}),
         ):
             rng = np.random.default_rng([seed, r])  # the same draws for the three policies
-            flight = fly(problem, plan, disturbance, rng, time_step, **kwargs)
+            flight = fly(problem, plan if name == "closed_loop" else full, disturbance, rng, time_step, **kwargs)
             costs[name].append(flight.cost)
             if name == "closed_loop":
-                times += flight.solve_times
                 flights.append(flight)
+        if progress is not None:
+            progress(r + 1)
     out: dict[str, Any] = {
         name: {
             "cost_mean": float(np.mean(c)),
@@ -172,8 +206,17 @@ def replan_monte_carlo(
         }
         for name, c in costs.items()
     }
-    out["replan_solve_time_s"] = {"median": float(np.median(times)), "max": float(np.max(times))} if times else {}
+    records = replanner.records
+    for key, values in (
+        ("replan_solve_time_s", [x.time_s for x in records]),
+        ("replan_iterations", [x.iterations for x in records]),
+    ):
+        out[key] = {"median": float(np.median(values)), "max": float(np.max(values))} if values else {}
+    out["replan_build_time_s"] = build_time
+    out["replan_failures"] = sum(not x.success for x in records)
     out["replan_every_s"] = every
-    out["plan_cost"] = plan.cost
+    out["horizon"] = {"kind": "shrinking"} if length is None else {"kind": "receding", "length": length}
+    out["warm_start"] = warm_start
+    out["plan_cost"] = full.cost
     out["flights"] = flights
     return out

@@ -4,15 +4,19 @@ Example (``problems/replan_drift.yaml``)::
 
     kind: replan
     problem: hussein2008.yaml                    # relative to this file
-    replan: {every: 0.5, horizon: shrinking}
+    replan: {every: 0.5, horizon: shrinking}     # or {every: 0.5, horizon: receding, length: 4.0}
     disturbance: {drift: [0.3, -0.2], force_noise_std: 0.05, seed: 1}
     monte_carlo: {runs: 20, time_step: 0.01}
+
+``replan.warm_start`` (``shifted``, the default; ``reused``; ``cold``) says how each re-solve starts
+(:mod:`mobisense.ocp.replan_window`). ``length`` must satisfy ``every ≤ length ≤ tf − t0``.
 
 ``mobisense replay FILE`` flies the closed loop (re-planned), the open loop (first plan) and no control
 with the same noise draws (:func:`mobisense.ocp.replan.replan_monte_carlo`) and writes ``summary.json``
 (``closed_loop``, ``open_loop``, ``no_control``: ``{cost_mean, cost_std, cost_stderr}``,
-``replan_solve_time_s``, ``replan_every_s``), ``result.nc`` (the flown paths and Σ of every closed-loop
-run, the plans made along run 0) and ``replan.png`` (the plans fanning out along the flown path).
+``replan_solve_time_s``, ``replan_iterations``, ``replan_every_s``, ``horizon``), ``result.nc`` (the flown
+paths and Σ of every closed-loop run and the plans made along every run, ``run × plan × plan_node``) and
+``replan.png`` (the plans of run 0 fanning out along its flown path).
 """
 
 from __future__ import annotations
@@ -21,19 +25,42 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
-from ...core.config import FiniteFloat, NonNegativeFloat, PositiveFloat, StrictModel
+from ...core.config import FiniteFloat, InvalidValue, NonNegativeFloat, PositiveFloat, StrictModel
 from ..simulation_result import SimulationResult
 
-__all__ = ["ReplanOptions", "DisturbanceOptions", "MonteCarloOptions", "ReplanScenario", "run_replan"]
+__all__ = [
+    "ReplanOptions",
+    "DisturbanceOptions",
+    "MonteCarloOptions",
+    "ReplanScenario",
+    "run_replan",
+    "check_against_problem",
+]
 
 
 class ReplanOptions(StrictModel):
     """When and over what horizon to re-plan."""
 
     every: PositiveFloat = Field(description="re-plan period (T)")
-    horizon: Literal["shrinking"] = Field("shrinking", description="re-solve over [t, tf] (receding: not yet)")
+    horizon: Literal["shrinking", "receding"] = Field(
+        "shrinking", description="re-solve over [t, tf] (shrinking) or [t, min(t + length, tf)] (receding)"
+    )
+    length: PositiveFloat | None = Field(None, description="receding-horizon window length L (T), every ≤ L ≤ tf − t0")
+    warm_start: Literal["shifted", "reused", "cold"] = Field(
+        "shifted", description="start of each re-solve: the previous plan shifted onto the new grid, reused, or cold"
+    )
+
+    @model_validator(mode="after")
+    def _window(self) -> ReplanOptions:
+        if self.horizon == "receding" and self.length is None:
+            raise InvalidValue("length", "a receding horizon needs its window length (T), e.g. length: 5.0")
+        if self.horizon == "shrinking" and self.length is not None:
+            raise InvalidValue("length", "only a receding horizon has a window length (set horizon: receding)")
+        if self.length is not None and self.every > self.length:
+            raise InvalidValue("every", f"expected every ≤ length = {self.length:g}, got {self.every:g}")
+        return self
 
 
 class DisturbanceOptions(StrictModel):
@@ -60,6 +87,14 @@ class ReplanScenario(StrictModel):
     disturbance: DisturbanceOptions = DisturbanceOptions()
     monte_carlo: MonteCarloOptions = MonteCarloOptions()
 
+    @model_validator(mode="after")
+    def _step(self) -> ReplanScenario:
+        if self.replan.every < self.monte_carlo.time_step:
+            step = self.monte_carlo.time_step
+            message = f"expected at least monte_carlo.time_step = {step:g} (one re-plan per step at most)"
+            raise InvalidValue("replan.every", f"{message}, got {self.replan.every:g}")
+        return self
+
 
 class ReplanResult(SimulationResult):
     """Closed loop vs open loop vs no control, with the plans of run 0."""
@@ -80,10 +115,10 @@ class ReplanResult(SimulationResult):
         ds = self.dataset
         fig, ax = plt.subplots(figsize=(6.4, 5.6))
         cmap = plt.get_cmap("viridis")
-        n_plans = ds.sizes["plan"]
+        n_plans = int(np.sum(np.isfinite(ds["plan_instant"].values[0])))
         for j in range(n_plans):
             for i in range(ds.sizes["sensor"]):
-                ax.plot(*ds["plan_p"].values[j, :, i].T, color=cmap(j / max(n_plans - 1, 1)), lw=0.9, alpha=0.8)
+                ax.plot(*ds["plan_p"].values[0, j, :, i].T, color=cmap(j / max(n_plans - 1, 1)), lw=0.9, alpha=0.8)
         ax.plot([], [], color=cmap(0.0), lw=0.9, label="plans (first → last: dark → light)")
         for i in range(ds.sizes["sensor"]):
             ax.plot(*ds["p"].values[0, :, i].T, "k", lw=2.0, label="flown (run 0)" if i == 0 else None)
@@ -102,14 +137,36 @@ class ReplanResult(SimulationResult):
         return fig
 
 
+def check_against_problem(config: ReplanScenario, source: Path) -> Any:
+    """The problem the file flies, after checking the window and the step against its horizon; ``ConfigError``.
+
+    The error names the scenario file and the key path (``replan.length``), or the problem file's own error.
+    """
+    from ...core.errors import ConfigError
+    from ...ocp.problem import load_problem
+
+    try:
+        problem = load_problem(Path(source).parent / config.problem)
+    except ConfigError as err:
+        raise ConfigError(f"{source}: problem: {err}") from None
+    span = problem.horizon.tf - problem.horizon.t0
+    if problem.solver.method != "direct":
+        raise ConfigError(f"{source}: problem: re-planning solves by direct collocation; the problem's "
+                          f"solver.method is {problem.solver.method!r}")  # fmt: skip
+    if config.replan.length is not None and config.replan.length > span:
+        raise ConfigError(f"{source}: replan.length: expected a window within the horizon, ≤ tf − t0 = {span:g}, "
+                          f"got {config.replan.length:g}")  # fmt: skip
+    if config.monte_carlo.time_step > span / 2:
+        raise ConfigError(f"{source}: monte_carlo.time_step: expected at most half the horizon ({span / 2:g}), "
+                          f"got {config.monte_carlo.time_step:g}")  # fmt: skip
+    return problem
+
+
 def run_replan(config: ReplanScenario, source: Path, seed: int | None = None) -> ReplanResult:
     """Run a ``kind: replan`` scenario (see module docstring)."""
-    import xarray as xr
-
-    from ...ocp.problem import load_problem
     from ...ocp.replan import Disturbance, replan_monte_carlo
 
-    problem = load_problem(Path(source).parent / config.problem)
+    problem = check_against_problem(config, source)
     d = config.disturbance
     r = replan_monte_carlo(
         problem,
@@ -118,18 +175,56 @@ def run_replan(config: ReplanScenario, source: Path, seed: int | None = None) ->
         every=config.replan.every,
         time_step=config.monte_carlo.time_step,
         seed=d.seed if seed is None else seed,
+        length=config.replan.length,
+        warm_start=config.replan.warm_start,
     )
     flights = r.pop("flights")
-    plans = flights[0].plans
-    names = [s.name for s in problem.sensors]
-    data: dict[str, Any] = {
-        "p": (("run", "time", "sensor", "xy"), np.stack([f.p for f in flights]), {"units": "L"}),
-        "Sigma": (("run", "time", "row", "col"), np.stack([f.Sigma for f in flights])),
-        "cost": (("run",), np.array([f.cost for f in flights])),
-        "plan_time": (("plan",), np.array([t for t, _ in plans]), {"long_name": "instant the plan was made"}),
-        "plan_p": (("plan", "plan_node", "sensor", "xy"), np.stack([p for _, p in plans]), {"units": "L"}),
-    }
-    coords = {"time": flights[0].t, "sensor": names, "xy": ["x", "y"]}
-    attrs = {"process_locations": np.asarray(problem.process.locations, float).ravel()}
     summary = {"kind": "replan", "problem": problem.name, **r}
-    return ReplanResult(xr.Dataset(data, coords=coords, attrs=attrs), summary)
+    return ReplanResult(_dataset(problem, flights), summary)
+
+
+def _dataset(problem: Any, flights: list[Any]) -> Any:
+    """``result.nc``: every closed-loop run's flown path, Σ, cost and plans, with CF names and units."""
+    import xarray as xr
+
+    u = problem.units.system()
+    L, T = u.of(length=1), u.of(time=1)
+
+    def attrs(long_name: str, units: str) -> dict[str, str]:
+        return {"long_name": long_name, "units": units}
+
+    data: dict[str, Any] = {
+        "p": (("run", "time", "sensor", "xy"), np.stack([f.p for f in flights]), attrs("flown sensor position", L)),
+        "Sigma": (("run", "time", "row", "col"), np.stack([f.Sigma for f in flights]),
+                  attrs("filter error covariance along the flown path", u.of(state=2))),
+        "cost": (("run",), np.array([f.cost for f in flights]), attrs("realised cost J of the closed loop",
+                                                                      u.of(cost=1))),
+        **_plan_variables(flights, L, T),
+    }  # fmt: skip
+    coords = {
+        "run": ("run", np.arange(len(flights)), attrs("Monte Carlo run", "1")),
+        "time": ("time", flights[0].t, attrs("time of the flight", T)),
+        "sensor": ("sensor", [s.name for s in problem.sensors], {"long_name": "sensor name"}),
+        "xy": ("xy", ["x", "y"], {"long_name": "planar component"}),
+    }
+    locations = np.asarray(problem.process.locations, float).ravel()
+    return xr.Dataset(data, coords=coords, attrs={"title": f"re-planning of {problem.name}",
+                                                   "process_locations": locations})  # fmt: skip
+
+
+def _plan_variables(flights: list[Any], L: str, T: str) -> dict[str, Any]:
+    """Every run's plans (``run × plan × plan_node``), NaN-padded where a run made fewer plans."""
+    runs, plans = len(flights), max(len(f.plans) for f in flights)
+    _, times, p = flights[0].plans[0]
+    instant = np.full((runs, plans), np.nan)
+    t = np.full((runs, plans, times.size), np.nan)
+    positions = np.full((runs, plans, *p.shape), np.nan)
+    for r, flight in enumerate(flights):
+        for j, (made, times, p) in enumerate(flight.plans):
+            instant[r, j], t[r, j], positions[r, j] = made, times, p
+    return {
+        "plan_instant": (("run", "plan"), instant, {"long_name": "instant the plan was made", "units": T}),
+        "plan_time": (("run", "plan", "plan_node"), t, {"long_name": "time of the planned position", "units": T}),
+        "plan_p": (("run", "plan", "plan_node", "sensor", "xy"), positions,
+                   {"long_name": "planned sensor position", "units": L}),
+    }  # fmt: skip

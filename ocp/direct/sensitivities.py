@@ -76,7 +76,7 @@ def _noise_names(noise: Any) -> list[str]:
 def leaf_sensitivities(problem: Problem, blocks: dict[str, np.ndarray]) -> dict[str, float]:
     """``{key path: dJ*/d(value)}`` for every numeric leaf of the problem (chain rule of path_constraints.md §4).
 
-    ``sensors[i].measures`` (which also moves the rows' locations) is not reported.
+    ``sensors[i].measures`` (when given as rows) moves ``C_i`` and the rows' locations (eq. path.8).
     """
     mats = problem.matrices()
     B, Q = np.asarray(problem.process.B, float), np.asarray(problem.process.Q, float)
@@ -91,6 +91,8 @@ def leaf_sensitivities(problem: Problem, blocks: dict[str, np.ndarray]) -> dict[
         rows = np.abs(problem.measurement_rows(i))
         d_loc += (rows / rows.sum(axis=1, keepdims=True)).T @ np.asarray(blocks[f"rowloc_{i}"])
         key = f"sensors[{i}]"
+        if sensor.measures is not None and not problem.is_point(i):
+            out |= _matrix_leaves(f"{key}.measures", _measures_gradient(problem, i, blocks))
         out |= _vector_leaves(f"{key}.p0", blocks[f"p0_{i}"]) | _vector_leaves(f"{key}.v0", blocks[f"v0_{i}"])
         for name, value in zip(_noise_names(sensor.noise), np.ravel(blocks[f"theta_{i}"]), strict=True):
             out[f"{key}.noise.{name}"] = float(value)
@@ -107,6 +109,22 @@ def leaf_sensitivities(problem: Problem, blocks: dict[str, np.ndarray]) -> dict[
     out["cost.alpha"] = float(blocks["alpha"][0])
     out |= _constraint_leaves(problem, blocks)
     return out
+
+
+def _measures_gradient(problem: Problem, i: int, blocks: dict[str, np.ndarray]) -> np.ndarray:
+    """dJ*/dC of sensor ``i``'s measurement rows C (m, n): directly and through the rows' locations (eq. path.8).
+
+    The location of row r is ``ℓ_r = Σ_j |c_rj| s_j / S_r`` with ``S_r = Σ_j |c_rj|``, so
+    ``∂ℓ_r/∂c_rj = sign(c_rj) (s_j − ℓ_r) / S_r``; at ``c_rj = 0`` the two one-sided derivatives differ and
+    their mean (``sign 0 = 0``, what a central difference converges to) is reported.
+    """
+    C = problem.measurement_rows(i)
+    locations = problem.matrices()["locations"]  # (n, 2)
+    S = np.abs(C).sum(axis=1, keepdims=True)  # (m, 1)
+    ell = problem.row_locations(i)  # (m, 2)
+    G_loc = np.asarray(blocks[f"rowloc_{i}"])  # (m, 2)
+    through = np.einsum("rk,rjk->rj", G_loc, locations[None, :, :] - ell[:, None, :])
+    return np.asarray(blocks[f"C_{i}"]) + np.sign(C) * through / S
 
 
 def _constraint_leaves(problem: Problem, blocks: dict[str, np.ndarray]) -> dict[str, float]:

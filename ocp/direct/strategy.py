@@ -157,7 +157,9 @@ class Continuation:
 
 
 def _cold(ctx: SolveContext) -> Continuation:
-    run = ctx.start("cold")
+    from .feasible_start import cold_start  # a start outside the keep-out zones (path_constraints.md §2.1)
+
+    run = ctx.start("cold", cold_start(ctx))
     run.attempt(1.0)
     return run
 

@@ -30,6 +30,7 @@ SHIPPED_KINDS = {
     "leader_follower_control3_paper": "leader_follower", "leader_follower_khepera2": "leader_follower",
     "leader_follower_khepera_switching": "leader_follower", "distributed_advection_diffusion_paper": "distributed",
     "distributed_advection_diffusion_paper_consistent": "distributed",
+    "keep_out": "problem", "separation": "problem", "replan_drift": "replan",
 }  # fmt: skip
 
 

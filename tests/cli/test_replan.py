@@ -38,7 +38,47 @@ def test_replan_file_writes_summary_result_and_figure(tmp_path) -> None:
     assert {"result.nc", "replan.png"} <= set(s["files"])
 
 
-def test_receding_horizon_is_rejected_with_the_key_path(tmp_path, capsys) -> None:
+@pytest.mark.slow
+def test_receding_replan_file_stores_every_runs_plans_with_cf_attributes(tmp_path) -> None:
+    import cf_units
+    import xarray as xr
+
+    from mobisense.core.netcdf import cf_problems
+
     out = tmp_path / "out"
-    assert cli.main(["replay", str(_files(tmp_path, horizon="receding")), "--out", str(out)]) == 2
-    assert "replan.horizon" in capsys.readouterr().err and not out.exists()
+    path = _files(tmp_path, horizon="receding", length=5.0)
+    assert cli.main(["replay", str(path), "--out", str(out), "--no-plot"]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["horizon"] == {"kind": "receding", "length": 5.0} and s["warm_start"] == "shifted"
+    with xr.open_dataset(out / "result.nc", engine="h5netcdf") as ds:
+        assert cf_problems(ds, cf_units.Unit) == []
+        assert ds["plan_p"].dims == ("run", "plan", "plan_node", "sensor", "xy") and ds.sizes["run"] == 2
+        # every run made its first plan and its re-plans at t = 2.5, 5, 7.5 (every = 2.5 over tf = 10)
+        assert ds["plan_instant"].values.tolist() == [[0.0, 2.5, 5.0, 7.5]] * 2
+        # a receding plan made at t covers [t, min(t + 5, 10)]
+        assert ds["plan_time"].values[0, :, -1].tolist() == pytest.approx([5.0, 7.5, 10.0, 10.0])
+
+
+@pytest.mark.parametrize(
+    ("replan", "monte_carlo", "key"),
+    [
+        ({"horizon": "receding"}, {}, "replan.length: a receding horizon needs"),
+        ({"horizon": "receding", "length": 0.0}, {}, "replan.length: expected a number > 0"),
+        ({"horizon": "receding", "length": 20.0}, {}, "replan.length: expected a window within the horizon"),
+        ({"horizon": "receding", "length": 2.0}, {}, "replan.every: expected every ≤ length"),
+        ({"length": 5.0}, {}, "replan.length: only a receding horizon"),
+        ({"warm_start": "hot"}, {}, "replan.warm_start"),
+        ({"every": 0.001}, {}, "replan.every: expected at least monte_carlo.time_step"),
+        ({}, {"runs": 100_000, "time_step": 1e-5}, "too large: 100000 runs × 1e+06 steps"),
+    ],
+)
+def test_bad_replan_files_exit_2_with_the_key_path_and_write_nothing(tmp_path, capsys, replan, monte_carlo, key):
+    path = _files(tmp_path, **replan)
+    if monte_carlo:
+        data = yaml.safe_load(path.read_text())
+        data["monte_carlo"].update(monte_carlo)
+        path.write_text(yaml.safe_dump(data))
+    out = tmp_path / "out"
+    assert cli.main(["replay", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert key in err and len(err.strip().splitlines()) == 1 and not out.exists()

@@ -117,6 +117,12 @@ def _distributed() -> dict[str, Any]:
     return data
 
 
+def _replan() -> dict[str, Any]:
+    return {"kind": "replan", "problem": "problem.yaml", "replan": {"every": 2.5, "horizon": "shrinking"},
+            "disturbance": {"drift": [0.3, -0.2], "force_noise_std": 0.05, "seed": 1},
+            "monte_carlo": {"runs": 1, "time_step": 0.05}}  # fmt: skip
+
+
 KINDS: dict[str, Kind] = {
     "solve": Kind("solve", ["solve", "--no-plot", "--quiet"], small_problem, _rename(("cost", "alpha"), "alhpa"),
                   "cost.alhpa: unknown key; did you mean 'alpha'", _set(("cost", "alpha")), "cost.alpha", "cost"),
@@ -139,4 +145,7 @@ KINDS: dict[str, Kind] = {
     "simulate distributed": Kind("simulate distributed", ["simulate", "distributed", "--no-plot"], _distributed,
                                  _rename(("network",), "netwrok"), "netwrok: unknown key; did you mean 'network'",
                                  _set(("time", "step")), "time.step", "time"),
+    "replan": Kind("replan", ["replay", "--no-plot", "--quiet"], _replan, _rename(("replan", "every"), "evrey"),
+                   "replan.evrey: unknown key; did you mean 'every'", _set(("monte_carlo", "time_step")),
+                   "monte_carlo.time_step", "replan", extra={"problem.yaml": small_problem}),
 }  # fmt: skip

@@ -55,6 +55,8 @@ def _problem(name: str) -> Problem:
         ),
         # an active disc touches the path near a node: a step of 1e-4 r already changes which nodes are
         # active (a second-order kink of J*, 1e-4 relative error measured), so the step is 1e-6
+        # s2 measures x1 + x2: the row moves C_2 and the location the row refers to (eq. path.8)
+        ("coupled_two_sensor.yaml", ["sensors[1].measures[0][0]", "sensors[1].measures[0][1]", "cost.alpha"], 1e-4),
         ("keep_out.yaml", ["constraints.keep_out[0].radius", "constraints.keep_out[0].center[1]", "cost.alpha"], 1e-6),
     ],
 )  # fmt: skip

@@ -1,0 +1,176 @@
+"""One re-plan: the window's problem, its terminal weight, its grid and its warm start (path_constraints.md §5).
+
+At a re-plan instant ``t`` the problem is re-posed on the window ``[t, t_e]`` — ``t_e = t_f`` (shrinking
+horizon) or ``min(t + L, t_f)`` (receding, length ``L``) — from the measured sensor states and the
+filter's Σ, on ``max(1, round(K (t_e − t)/(t_f − t_0)))`` intervals (the problem's grid spacing). When
+``t_e < t_f`` the terminal weight is the cost-to-go of Σ without further measurements (eq. path.7) and
+fixed terminal sensor states are dropped (they belong to ``t_f``). :class:`Replanner` keeps one
+transcription per interval count and starts each re-solve as ``warm_start`` says:
+
+``shifted`` (default)
+    the previous plan's primal–dual point moved onto the new grid (:mod:`mobisense.ocp.direct.warm_shift`);
+``reused``
+    the previous point index by index on a grid of the plan's interval count (the window's spacing then
+    shrinks with it): the point is where the previous solution was in *its* time grid;
+``cold``
+    the coasting guess, no multipliers.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+from scipy.linalg import expm
+
+from .problem import Problem
+
+__all__ = ["WARM_STARTS", "cost_to_go_weight", "window_problem", "Replanner", "ReplanRecord"]
+
+WarmStart = Literal["shifted", "reused", "cold"]
+#: how a re-solve starts (see module docstring)
+WARM_STARTS: tuple[str, ...] = ("shifted", "reused", "cold")
+
+
+def cost_to_go_weight(A: np.ndarray, M: np.ndarray, K: np.ndarray, remaining: float) -> np.ndarray:
+    """Λ(t_e) of eq. path.7: ``e^{Aᵀτ} M e^{Aτ} + ∫₀^τ e^{Aᵀs} K e^{As} ds`` with ``τ = remaining`` (T), (n, n).
+
+    The integral is Van Loan's block exponential: ``expm([[−Aᵀ, K], [0, A]] τ) = [[·, F₁₂], [0, F₂₂]]``
+    gives it as ``F₂₂ᵀ F₁₂``.
+    """
+    n = A.shape[0]
+    block = np.zeros((2 * n, 2 * n))
+    block[:n, :n], block[:n, n:], block[n:, n:] = -A.T, K, A
+    F = expm(block * remaining)
+    Phi = F[n:, n:]
+    out = Phi.T @ M @ Phi + Phi.T @ F[:n, n:]
+    return 0.5 * (out + out.T)
+
+
+def window_problem(
+    problem: Problem,
+    t: float,
+    t_end: float,
+    p: np.ndarray,
+    v: np.ndarray,
+    Sigma: np.ndarray,
+    intervals: int,
+    strategy: str | None = "cold",
+) -> Problem:
+    """``problem`` on ``[t, t_end]`` from positions ``p``, velocities ``v`` (N, 2), Σ (n, n), on ``intervals``.
+
+    ``strategy``: the solve strategy if the warm start fails (None: the problem's).
+    """
+    data = problem.normalised()
+    data["horizon"]["t0"], data["horizon"]["tf"] = float(t), float(t_end)
+    data["process"]["Sigma0"] = (0.5 * (Sigma + Sigma.T)).tolist()
+    tf = problem.horizon.tf
+    for i, sensor in enumerate(data["sensors"]):
+        sensor["p0"], sensor["v0"] = p[i].tolist(), v[i].tolist()
+        if t_end < tf:
+            sensor["terminal"] = None
+    if t_end < tf:
+        m = problem.matrices()
+        data["cost"]["M"] = cost_to_go_weight(m["A"], m["M"], m["K"], tf - t_end).tolist()
+    if strategy is not None:
+        data["solver"]["strategy"] = strategy
+    data["solver"]["collocation"]["intervals"] = int(intervals)
+    return Problem.from_dict(data, source="<re-plan>")
+
+
+@dataclass
+class ReplanRecord:
+    """What one re-solve cost: instant (T), window end (T), intervals, Ipopt iterations, wall time (s), success."""
+
+    t: float
+    t_end: float
+    intervals: int
+    iterations: int
+    time_s: float
+    success: bool
+
+
+@dataclass
+class Replanner:
+    """Re-solves ``problem`` on windows (see module docstring); one transcription per interval count.
+
+    Parameters
+    ----------
+    problem : Problem
+    length : float or None
+        Receding-horizon length L (T); None: shrinking horizon.
+    warm_start : {"shifted", "reused", "cold"}
+    """
+
+    problem: Problem
+    length: float | None = None
+    warm_start: WarmStart = "shifted"
+    records: list[ReplanRecord] = field(default_factory=list)
+    _transcriptions: dict[Any, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.warm_start not in WARM_STARTS:
+            raise ValueError(f"warm_start: expected one of {WARM_STARTS}, got {self.warm_start!r}")
+
+    def window(self, t: float) -> tuple[float, int]:
+        """Window end t_e (T) and interval count at re-plan instant ``t``."""
+        h = self.problem.horizon
+        t_end = h.tf if self.length is None else min(t + self.length, h.tf)
+        K = self.problem.solver.collocation.intervals
+        if self.warm_start == "reused":
+            return t_end, K
+        return t_end, max(1, int(round(K * (t_end - t) / (h.tf - h.t0))))
+
+    def transcription(self, sub: Problem) -> Any:
+        """The (kept) transcription of a window problem."""
+        from .direct.transcription import transcription_for
+        from .model import Structure
+
+        key = (Structure.of(sub), sub.solver.collocation.intervals)
+        if key not in self._transcriptions:
+            self._transcriptions[key] = transcription_for(sub)
+        return self._transcriptions[key]
+
+    def prepare(self, instants: np.ndarray) -> float:
+        """Build the transcriptions of the windows at re-plan ``instants`` (T) before flying; wall time (s)."""
+        start = time.perf_counter()
+        sensors = self.problem.sensors
+        p, v = (np.array([getattr(s, key) for s in sensors], float) for key in ("p0", "v0"))
+        Sigma0 = self.problem.matrices()["Sigma0"]
+        for t in instants:
+            t_end, K = self.window(float(t))
+            self.transcription(window_problem(self.problem, float(t), t_end, p, v, Sigma0, K))
+        return time.perf_counter() - start
+
+    def first_plan(self) -> Any:
+        """The plan over the first window (the problem's solve strategy)."""
+        from .direct.solver import solve_direct
+
+        h, sensors = self.problem.horizon, self.problem.sensors
+        t_end, K = self.window(h.t0)
+        p, v = (np.array([getattr(s, key) for s in sensors], float) for key in ("p0", "v0"))
+        sub = window_problem(self.problem, h.t0, t_end, p, v, self.problem.matrices()["Sigma0"], K, strategy=None)
+        return solve_direct(sub, transcription=self.transcription(sub))
+
+    def solve(self, previous: Any, t: float, p: np.ndarray, v: np.ndarray, Sigma: np.ndarray) -> Any:
+        """The plan re-solved at ``t`` from ``p``, ``v``, Σ, started from ``previous`` (None: cold)."""
+        from .direct.solver import solve_direct
+        from .direct.warm_shift import shifted_point
+
+        t_end, K = self.window(t)
+        sub = window_problem(self.problem, t, t_end, p, v, Sigma, K)
+        tr = self.transcription(sub)  # built before the flight by prepare(): not part of the re-solve time
+        start = time.perf_counter()
+        init: Any = None
+        if previous is not None and self.warm_start == "shifted":
+            P_new = tr.layout.pack(tr.layout.values(sub))  # cost_scale 1: solve_direct re-scales the point
+            init = shifted_point(previous, self.transcription(previous.problem), tr, P_new, (t, t_end))
+        elif previous is not None and self.warm_start == "reused":
+            init = previous
+        new = solve_direct(sub, transcription=tr, init=init)
+        elapsed = time.perf_counter() - start
+        iterations = sum(step.iterations for step in new.homotopy)
+        self.records.append(ReplanRecord(t, t_end, K, iterations, elapsed, new.success))
+        return new
