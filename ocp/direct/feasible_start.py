@@ -1,4 +1,4 @@
-"""A start outside the keep-out zones for the direct method (docs/theory/path_constraints.md §2.1).
+"""A start outside the keep-out zones and apart by min_separation (docs/theory/path_constraints.md §2.1).
 
 The coasting guess of a cold solve may run through a zone; a path that crosses a disc head-on is the worst
 case: at the disc's centre the constraint's gradient vanishes, and Ipopt's restoration phase picks a side
@@ -23,19 +23,55 @@ import numpy as np
 from ..path_constraints import KeepOutDisc, margins
 from ..problem import Problem
 
-__all__ = ["needs_detour", "detour_positions", "detour_guess", "cold_start"]
+__all__ = ["needs_detour", "separate_positions", "detour_positions", "detour_guess", "cold_start"]
 
 #: distance kept from a zone, relative to its size (disc radius, polygon √area)
 MARGIN = 0.05
 
 
 def needs_detour(problem: Problem, p: np.ndarray) -> bool:
-    """True when positions ``p`` (T, N, 2) enter a keep-out zone."""
+    """True when positions ``p`` (T, N, 2) enter a keep-out zone or come closer than ``min_separation``."""
     c = problem.constraints
-    if c is None or not c.keep_out:
+    if c is None or not (c.keep_out or c.min_separation is not None):
         return False
     zero = np.zeros_like(p)
-    return any(np.max(v) > 0 for k, v in margins(c, p, zero).items() if k.startswith("keep_out"))
+    moved = ("keep_out", "min_separation")
+    return any(np.max(v) > 0 for k, v in margins(c, p, zero).items() if k.startswith(moved))
+
+
+def separate_positions(problem: Problem, p: np.ndarray, v: np.ndarray, margin: float = MARGIN) -> np.ndarray:
+    """Positions ``p`` (T, N, 2) of sensors closer than ``min_separation`` × (1 + margin) pushed apart.
+
+    Each such pair is moved apart symmetrically along the line joining it, by half the deficit each; a pair
+    at the same point (the separation's gradient vanishes there, as a disc's at its centre) is split across
+    the mean heading of the two, ``v`` (T, N, 2). A few sweeps over the pairs settle three or more sensors.
+    """
+    out = np.array(p, float)
+    c = problem.constraints
+    if c is None or c.min_separation is None or out.shape[1] < 2:
+        return out
+    d = c.min_separation * (1 + margin)
+    N = out.shape[1]
+    for _ in range(8):
+        moved = False
+        for i in range(N):
+            for j in range(i + 1, N):
+                gap = out[:, i] - out[:, j]
+                dist = np.linalg.norm(gap, axis=1)
+                for t in np.nonzero(dist < d)[0]:
+                    if dist[t] > 1e-9 * d:
+                        unit = gap[t] / dist[t]
+                    else:
+                        heading = v[t, i] + v[t, j]
+                        heading = heading if np.linalg.norm(heading) > 0 else np.array([1.0, 0.0])
+                        unit = _side(heading, np.zeros(2))
+                    push = 0.5 * (d - dist[t]) * unit
+                    out[t, i] += push
+                    out[t, j] -= push
+                    moved = True
+        if not moved:
+            break
+    return out
 
 
 def _side(heading: np.ndarray, towards: np.ndarray) -> np.ndarray:
@@ -45,8 +81,12 @@ def _side(heading: np.ndarray, towards: np.ndarray) -> np.ndarray:
 
 
 def detour_positions(problem: Problem, p: np.ndarray, v: np.ndarray, margin: float = MARGIN) -> np.ndarray:
-    """Positions ``p`` (T, N, 2) moved out of every keep-out zone (see module docstring); velocities ``v`` alike."""
-    out = np.array(p, float)
+    """Positions ``p`` (T, N, 2) apart and out of every keep-out zone (see module docstring); ``v`` the velocities.
+
+    Sensors closer than ``min_separation`` are pushed apart first (:func:`separate_positions`); the zones
+    have the last word.
+    """
+    out = separate_positions(problem, p, v, margin)  # first: the zones have the last word
     target = np.mean(np.asarray(problem.process.locations, float), axis=0)
     for zone in problem.constraints.keep_out if problem.constraints is not None else []:
         if isinstance(zone, KeepOutDisc):
@@ -92,10 +132,12 @@ def detour_guess(problem: Problem, tr: Any, w0: np.ndarray, P: np.ndarray) -> np
 def cold_start(ctx: Any) -> np.ndarray:
     """The start of a cold solve of a :class:`~mobisense.ocp.direct.strategy.SolveContext` (scaled, (nw,)).
 
-    The coasting guess, or its detour when that enters a keep-out zone.
+    The coasting guess, or its detour when that enters a keep-out zone or brings sensors closer than
+    ``min_separation``.
     """
     problem, tr = ctx.problem, ctx.tr
-    if problem.constraints is None or not problem.constraints.keep_out:
+    c = problem.constraints
+    if c is None or not (c.keep_out or c.min_separation is not None):
         return ctx.w0
     P = ctx.parameters(1.0)
     _, p, _ = tr.structure.state.split(tr.unpack(ctx.w0, P)["xs"])

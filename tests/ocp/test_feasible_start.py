@@ -7,7 +7,7 @@ import pytest
 import yaml
 from reference_problems import PROBLEMS
 
-from mobisense.ocp.direct.feasible_start import detour_positions, needs_detour
+from mobisense.ocp.direct.feasible_start import MARGIN, detour_positions, needs_detour, separate_positions
 from mobisense.ocp.direct.guesses import coasting_start
 from mobisense.ocp.direct.solver import solve_direct
 from mobisense.ocp.direct.transcription import transcription_for
@@ -60,3 +60,46 @@ def test_a_cold_solve_from_the_detour_takes_fewer_iterations_to_the_same_optimum
     # 0.56–0.77 of the plain start's); the same optimum to Ipopt's tolerance 1e-9 on J/cost_scale
     assert iterations[1] <= 0.85 * iterations[0], iterations
     assert detour.cost == pytest.approx(plain.cost, rel=1e-8)
+
+
+def _crossing(vy: float) -> Problem:
+    """problems/separation.yaml with the two sensors' coasting paths meeting at (4, 0) at t = 4 (same point)."""
+    data = yaml.safe_load((PROBLEMS / "separation.yaml").read_text())
+    for sensor, sign in zip(data["sensors"], (1.0, -1.0), strict=True):
+        sensor["p0"], sensor["v0"] = [8.0, sign * 4 * vy], [-1.0, -sign * vy]
+    return Problem.from_dict(data).with_solver(strategy="cold")
+
+
+def test_sensors_closer_than_the_separation_are_pushed_apart_even_from_the_same_point() -> None:
+    problem = _crossing(0.5)
+    d = problem.constraints.min_separation * (1 + MARGIN)
+    t = np.linspace(0.0, 8.0, 161)
+    v = np.broadcast_to([[-1.0, -0.5], [-1.0, 0.5]], (t.size, 2, 2))
+    p = np.array([[8.0, 2.0], [8.0, -2.0]]) + t[:, None, None] * v  # coincident at t = 4
+    assert needs_detour(problem, p)
+    apart = separate_positions(problem, p, v)
+    assert np.all(np.linalg.norm(apart[:, 0] - apart[:, 1], axis=1) >= d - 1e-12)
+    far = np.linalg.norm(p[:, 0] - p[:, 1], axis=1) >= d
+    np.testing.assert_array_equal(apart[far], p[far])  # pairs already apart are not touched
+    mid = np.argmin(np.abs(t - 4.0))  # split across the common heading (-1, 0): along ±y, symmetric about (4, 0)
+    np.testing.assert_allclose(apart[mid].mean(axis=0), [4.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(np.abs(apart[mid, :, 1]), 0.5 * d)
+    three = problem.normalised()
+    three["sensors"] = [*three["sensors"], {**three["sensors"][0], "name": "s3", "p0": [8.0, 0.0]}]
+    same = np.zeros((1, 3, 2))  # three sensors at one point: a few sweeps settle them
+    moved = separate_positions(Problem.from_dict(three), same, np.broadcast_to([-1.0, 0.0], (1, 3, 2)))
+    gaps = [np.linalg.norm(moved[0, i] - moved[0, j]) for i in range(3) for j in range(i + 1, 3)]
+    assert min(gaps) >= 0.9 * d  # sequential pair moves: the last sweep leaves each gap within 10 % of d
+
+
+@pytest.mark.slow
+def test_a_cold_solve_of_two_sensors_crossing_at_one_point_starts_apart_and_keeps_the_separation() -> None:
+    # from the coasting guess (the two sensors at one point at t = 4, where the separation's gradient vanishes)
+    # Ipopt spent its 500 iterations without converging (measured); from the pushed-apart start it converges
+    problem = _crossing(0.5)
+    solution = solve_direct(problem)
+    assert solution.success
+    report = solution.stats["constraints"]["min_separation"]
+    assert report["active"] and report["max_violation_at_nodes"] <= 1e-6  # Ipopt's constr_viol_tol scale
+    free = solve_direct(Problem.from_dict({k: v for k, v in problem.normalised().items() if k != "constraints"}))
+    assert solution.cost >= free.cost * (1 - 1e-9)  # a constraint cannot lower the optimum
