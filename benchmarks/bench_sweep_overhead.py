@@ -1,8 +1,9 @@
 """Warm-started sweeps through the command's path (``run_sweep``): parallel speed-up and per-task overhead.
 
-    .venv/bin/python benchmarks/bench_sweep_overhead.py [--workers 2] [--repeats 3]
+    .venv/bin/python benchmarks/bench_sweep_overhead.py [--workers 2] [--repeats 3] [--alphas 8]
 
-The 40 tasks of ``bench_sweep.py`` (8 α × 5 start positions of the default problem, K = 60) as a sweep file,
+The 40 tasks of ``bench_sweep.py`` (8 α × 5 start positions of the default problem, K = 60; ``--alphas 40``:
+200 tasks, where the one cold head per chain weighs less) as a sweep file,
 run by :func:`mobisense.ocp.batch.run_sweep` on a LocalCluster (chains of neighbours, one per worker, each
 task warm-started on its worker from its predecessor; solutions written by the client as stacked part files
 with the rows), against the same work serially in this process: the same tasks in the same snake order as
@@ -39,18 +40,21 @@ from mobisense.ocp.batch.sweep import expand_sweep, load_sweep
 from mobisense.ocp.batch.sweep_report import SweepProgress
 from mobisense.ocp.task_files import write_task_files
 
-ALPHAS = [float(a) for a in np.geomspace(0.001, 0.02, 8)]
+
+def alphas(count: int) -> list[float]:
+    """``count`` values of α, geometrically spaced over [0.001, 0.02] (8: bench_sweep.py's)."""
+    return [float(a) for a in np.geomspace(0.001, 0.02, count)]
 ROOT = Path(__file__).resolve().parent.parent
 STARTS = [[float(14.14 * np.cos(np.deg2rad(45 + a))), float(14.14 * np.sin(np.deg2rad(45 + a)))]
           for a in np.linspace(-60, 60, 5)]  # fmt: skip
 
 
-def write_sweep(folder: Path) -> Path:
-    """The 40-task sweep file (and its base problem) in ``folder``."""
+def write_sweep(folder: Path, count: int = 8) -> Path:
+    """The sweep file of ``count`` α × 5 starts (and its base problem) in ``folder``."""
     base = yaml.safe_load((ROOT / "problems" / "hussein2008.yaml").read_text())
     base["solver"]["collocation"].update(intervals=60)
     (folder / "base.yaml").write_text(yaml.safe_dump(base))
-    sweep = {"base": "base.yaml", "mode": "grid", "vary": {"cost.alpha": ALPHAS, "sensors[0].p0": STARTS}}
+    sweep = {"base": "base.yaml", "mode": "grid", "vary": {"cost.alpha": alphas(count), "sensors[0].p0": STARTS}}
     (folder / "sweep.yaml").write_text(yaml.safe_dump(sweep))
     return folder / "sweep.yaml"
 
@@ -108,12 +112,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument(
+        "--alphas", type=int, default=8, help="values of α (× 5 starts = tasks; 8: the 40 tasks of bench_sweep.py)"
+    )
     args = parser.parse_args()
     print(f"load average before: {os.getloadavg()[0]:.2f} ({os.cpu_count()} cores)")
     runs: dict[str, list[dict[str, Any]]] = {"serial": [], "parallel": []}
     with tempfile.TemporaryDirectory() as tmp, open_client(None, args.workers) as client:
         tmp = Path(tmp)
-        path = write_sweep(tmp)
+        path = write_sweep(tmp, args.alphas)
         first = {"problem": yaml.safe_load((tmp / "base.yaml").read_text())}
         solve_in_chain(first)  # imports and the first build, here and on every worker, before any clock
         client.run(solve_in_chain, first)
