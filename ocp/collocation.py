@@ -69,6 +69,29 @@ class CollocationScheme:
         """True when the last collocation node is the interval end (Radau)."""
         return bool(abs(self.tau[-1] - 1.0) < 1e-14)
 
+    def locate(self, times: np.ndarray, t0: float, tf: float, K: int) -> tuple[np.ndarray, np.ndarray]:
+        """Interval index ``k`` (T,) and local time ``s`` in [0, 1] (T,) of each of ``times`` on K equal intervals.
+
+        Interval k covers (t_k, t_k+1]: a Radau control node at τ = 1 belongs to the interval it ends.
+        """
+        scaled = (np.asarray(times, float) - t0) / ((tf - t0) / K)
+        k = np.clip(np.ceil(scaled - 1e-9).astype(int) - 1, 0, K - 1)
+        return k, scaled - k
+
+    def evaluate(
+        self, times: np.ndarray, t0: float, tf: float, states: np.ndarray, controls: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The collocation polynomials at ``times`` in [t0, tf]: states (T, nx) and controls (T, nu).
+
+        ``states`` (K, d + 1, nx) are each interval's state nodes (its start and collocation points),
+        ``controls`` (K, d, nu) its control nodes; the states are the Lagrange polynomials through the d + 1
+        nodes, the controls those through the d collocation nodes (the functions the NLP optimises).
+        """
+        k, s = self.locate(times, t0, tf, len(states))
+        x = np.einsum("tj,tjx->tx", self.interpolation_matrix(s, "all"), states[k])
+        u = np.einsum("tj,tjc->tc", self.interpolation_matrix(s, "collocation"), controls[k])
+        return x, u
+
     def interpolation_matrix(self, s: np.ndarray, nodes: str = "collocation") -> np.ndarray:
         """Lagrange interpolation weights at local times ``s`` in [0, 1].
 

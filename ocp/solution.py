@@ -358,19 +358,10 @@ class Solution:
         scheme, degree, K = self.collocation  # type: ignore[misc]
         colloc = CollocationScheme(scheme, degree)
         t0, tf = float(self.t[0]), float(self.t[-1])
-        h = (tf - t0) / K
-        # interval k covers (t_k, t_k+1]: a Radau control node at τ = 1 belongs to the interval it ends
-        scaled = (times - t0) / h
-        k = np.clip(np.ceil(scaled - 1e-9).astype(int) - 1, 0, K - 1)
-        s = scaled - k
-        node_times = t0 + h * (np.arange(K)[:, None] + colloc.tau[None, :])  # (K, d+1)
+        node_times = t0 + (tf - t0) / K * (np.arange(K)[:, None] + colloc.tau[None, :])  # (K, d+1)
         tol = 1e-9 * abs(tf - t0) / K + 8 * np.finfo(float).eps * max(abs(t0), abs(tf))
         index = np.clip(np.searchsorted(self.t, node_times - tol), 0, len(self.t) - 1)
-        basis = colloc.interpolation_matrix(s, "all")  # (T, d+1)
-        x_t = np.einsum("tj,tjx->tx", basis, x[index[k]])
-        u_nodes = self.u.reshape(K, degree, -1)
-        u_t = np.einsum("tj,tjc->tc", colloc.interpolation_matrix(s, "collocation"), u_nodes[k])
-        return x_t, u_t
+        return colloc.evaluate(times, t0, tf, x[index], self.u.reshape(K, degree, -1))
 
     def __repr__(self) -> str:
         base = self.baseline.get("cost")

@@ -32,15 +32,8 @@ def _polynomials(
 ) -> tuple[np.ndarray, np.ndarray]:
     """States (T, nx) and controls (T, nu) of the NLP point ``w`` on ``window`` at ``times`` (clipped to it)."""
     parts = tr.unpack(w, P)
-    K = tr.intervals
-    h = (window[1] - window[0]) / K
-    scaled = (np.clip(times, *window) - window[0]) / h
-    k = np.clip(np.ceil(scaled - 1e-9).astype(int) - 1, 0, K - 1)  # (t_k, t_k+1] belongs to interval k
-    s = scaled - k
     nodes = np.concatenate([parts["xs"][:-1, None, :], parts["xc"]], axis=1)  # (K, d + 1, nx)
-    x = np.einsum("tj,tjx->tx", tr.colloc.interpolation_matrix(s, "all"), nodes[k])
-    u = np.einsum("tj,tjc->tc", tr.colloc.interpolation_matrix(s, "collocation"), parts["u"][k])
-    return x, u  # fmt: skip
+    return tr.colloc.evaluate(np.clip(times, *window), *window, nodes, parts["u"])
 
 
 def _source_intervals(t_old: tuple[float, float], k_old: int, t_new: tuple[float, float], k_new: int) -> np.ndarray:
