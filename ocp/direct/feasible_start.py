@@ -16,6 +16,7 @@ guess itself.
 
 from __future__ import annotations
 
+import itertools
 from typing import Any
 
 import numpy as np
@@ -51,24 +52,24 @@ def separate_positions(problem: Problem, p: np.ndarray, v: np.ndarray, margin: f
     if c is None or c.min_separation is None or out.shape[1] < 2:
         return out
     d = c.min_separation * (1 + margin)
-    N = out.shape[1]
+    pairs = list(itertools.combinations(range(out.shape[1]), 2))
     for _ in range(8):
         moved = False
-        for i in range(N):
-            for j in range(i + 1, N):
-                gap = out[:, i] - out[:, j]
-                dist = np.linalg.norm(gap, axis=1)
-                for t in np.nonzero(dist < d)[0]:
-                    if dist[t] > 1e-9 * d:
-                        unit = gap[t] / dist[t]
-                    else:
-                        heading = v[t, i] + v[t, j]
-                        heading = heading if np.linalg.norm(heading) > 0 else np.array([1.0, 0.0])
-                        unit = _side(heading, np.zeros(2))
-                    push = 0.5 * (d - dist[t]) * unit
-                    out[t, i] += push
-                    out[t, j] -= push
-                    moved = True
+        for i, j in pairs:  # every time of one pair at once: the times do not interact
+            gap = out[:, i] - out[:, j]
+            dist = np.linalg.norm(gap, axis=1)
+            close = dist < d
+            if not close.any():
+                continue
+            heading = v[:, i] + v[:, j]
+            heading[np.linalg.norm(heading, axis=1) == 0] = [1.0, 0.0]
+            across = np.stack([-heading[:, 1], heading[:, 0]], axis=1) / np.linalg.norm(heading, axis=1)[:, None]
+            apart = dist > 1e-9 * d
+            unit = np.where(apart[:, None], gap / np.where(apart, dist, 1.0)[:, None], across)
+            push = 0.5 * (d - dist[close])[:, None] * unit[close]
+            out[close, i] += push
+            out[close, j] -= push
+            moved = True
         if not moved:
             break
     return out
