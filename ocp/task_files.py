@@ -49,7 +49,10 @@ def shape_key(dataset: Any) -> tuple[Any, ...]:
 
     ``dataset`` is an ``xarray.Dataset`` or a :class:`~mobisense.core.netcdf_writer.DatasetContent`.
     """
-    variables, _, _ = _parts(dataset)
+    return _key(_parts(dataset)[0])
+
+
+def _key(variables: dict[str, Any]) -> tuple[Any, ...]:
     return tuple(
         (name, dims, values.shape, values.dtype.kind, json.dumps(attrs, sort_keys=True, default=str))
         for name, (dims, values, attrs) in sorted(variables.items())
@@ -94,7 +97,8 @@ def stack_tasks(datasets: list[Any], indices: list[int], task_ids: list[str]) ->
 
     parts = [_parts(ds) for ds in datasets]
     first, coord_names, _ = parts[0]
-    if any(shape_key(ds) != shape_key(datasets[0]) for ds in datasets[1:]):
+    key = _key(first)
+    if any(_key(variables) != key for variables, _, _ in parts[1:]):
         raise ValueError("stack_tasks: the datasets differ in their variables or shapes")
     index_dims = {name for name, (dims, _, _) in first.items() if dims == (name,)}
     out = DatasetContent()
