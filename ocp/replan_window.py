@@ -23,8 +23,8 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
-from scipy.linalg import expm
 
+from .discretisation import discretise_process
 from .problem import Problem
 
 __all__ = ["WARM_STARTS", "cost_to_go_weight", "window_problem", "Replanner", "ReplanRecord"]
@@ -37,15 +37,10 @@ WARM_STARTS: tuple[str, ...] = ("shifted", "reused", "cold")
 def cost_to_go_weight(A: np.ndarray, M: np.ndarray, K: np.ndarray, remaining: float) -> np.ndarray:
     """Λ(t_e) of eq. path.7: ``e^{Aᵀτ} M e^{Aτ} + ∫₀^τ e^{Aᵀs} K e^{As} ds`` with ``τ = remaining`` (T), (n, n).
 
-    The integral is Van Loan's block exponential: ``expm([[−Aᵀ, K], [0, A]] τ) = [[·, F₁₂], [0, F₂₂]]``
-    gives it as ``F₂₂ᵀ F₁₂``.
+    The integral is Van Loan's (:func:`~mobisense.ocp.discretisation.discretise_process` for ``Aᵀ`` and ``K``).
     """
-    n = A.shape[0]
-    block = np.zeros((2 * n, 2 * n))
-    block[:n, :n], block[:n, n:], block[n:, n:] = -A.T, K, A
-    F = expm(block * remaining)
-    Phi = F[n:, n:]
-    out = Phi.T @ M @ Phi + Phi.T @ F[:n, n:]
+    F, integral = discretise_process(np.asarray(A, float).T, np.asarray(K, float), remaining)  # F = e^{Aᵀτ}
+    out = F @ M @ F.T + integral
     return 0.5 * (out + out.T)
 
 

@@ -30,6 +30,7 @@ from pydantic import Field
 
 from ...core.config import PositiveFloat, Seed, StrictModel, Vector2
 from ...estimation import kalman
+from ...ocp.discretisation import discretise_process
 from ..platforms import PlatformLimits, PlatformLimitsConfig, newton_rates
 from .reference import ReferenceTrajectory, TrackingController
 
@@ -138,19 +139,6 @@ def simulate_tracking(
 
 
 # ---------------------------------------------------------------------------------------- estimation
-def discretise_process(A: np.ndarray, BQB: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """``F = e^{AΔt}`` and ``Q_d = ∫_0^Δt e^{As} BQB' e^{A's} ds`` by Van Loan's block exponential."""
-    from scipy.linalg import expm
-
-    n = A.shape[0]
-    block = np.zeros((2 * n, 2 * n))
-    block[:n, :n], block[:n, n:], block[n:, n:] = -A, BQB, A.T
-    E = expm(block * dt)
-    F = E[n:, n:].T
-    Qd = F @ E[:n, n:]
-    return F, 0.5 * (Qd + Qd.T)
-
-
 def measurement_variances(problem: Problem, positions: np.ndarray) -> np.ndarray:
     """Variances ``r`` of every measurement row at the sensor positions, by the noise models (docs/theory/ocp.md §1.3).
 
