@@ -75,11 +75,6 @@ def build_parser(commands: Sequence[str] | None = None) -> argparse.ArgumentPars
     return parser
 
 
-def _terminate(signum: int, frame: Any) -> None:
-    """SIGTERM (``kill``, a batch scheduler ending the job) stops a command like Ctrl-C."""
-    raise KeyboardInterrupt
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (also used by ``python -m``/console script)."""
     said: list[str] = []
@@ -103,42 +98,65 @@ def _main(argv: Sequence[str] | None, said: list[str]) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exit_:  # --help, --version, usage errors: argparse has printed what to say
         return exit_.code if isinstance(exit_.code, int) else 2
-    previous = signal.signal(signal.SIGTERM, _terminate) if _main_thread() else None
+    from .core.interrupts import forget_interrupts, interrupt_handler, interrupt_received, raise_if_interrupted
+
+    forget_interrupts()
+    # Ctrl-C and SIGTERM (``kill``, a batch scheduler ending the job) both stop a command; the handler records
+    # the signal too, so one swallowed by CasADi's bindings is acted on at the next check instead of lost
+    watched = (signal.SIGINT, signal.SIGTERM)
+    previous = {sig: signal.signal(sig, interrupt_handler) for sig in watched} if _main_thread() else {}
     import numpy as np
 
     # overflow/invalid-value warnings of intermediate steps are not messages: results are checked for NaN/inf
     errors = np.seterr(all="ignore")
-    from .core.errors import ComputationError, ConfigError, OutputError, one_line  # after parsing: ``--help``
     from .core.netcdf import recorded_command  # needs neither pydantic nor numpy
 
     try:
         with recorded_command(argv):  # the "history" of every netCDF file written
-            return int(args.run(args) or 0)
-    except ConfigError as err:
-        _say(f"error: {one_line(str(err), 600)}")
-        return 2
-    except (ComputationError, OutputError) as err:
-        _say(f"error: {one_line(str(err), 600)}")
-        return 1
+            status = int(args.run(args) or 0)
+            raise_if_interrupted()  # a signal that arrived in CasADi code and was not acted on before the end
+            return status
     except KeyboardInterrupt:
-        said.append("interrupted")
-        _say("interrupted; files already written are complete")
-        return 130
+        return _interrupted(said)
     except BrokenPipeError:
         raise
-    except MemoryError:
-        _say("error: out of memory; lower the problem size (or --max-memory, the budget checked before starting)")
-        return 1
-    except Exception as err:  # noqa: BLE001  (a bug: one line, the traceback on request)
-        if os.environ.get("MOBISENSE_TRACEBACK"):
-            raise
-        _say(f"internal error: {one_line(f'{type(err).__name__}: {err}', 300)} (a bug: please report it with "
-             "the input; MOBISENSE_TRACEBACK=1 shows the traceback)")  # fmt: skip
-        return 3
+    except Exception as err:  # noqa: BLE001  (sorted out in _report: input, computation, output or a bug)
+        # an error raised while a signal was being handled is its doing: Python turns an exception raised in
+        # ``__set_name__`` (class creation) into a RuntimeError, CasADi's callbacks into a solver failure
+        return _interrupted(said) if interrupt_received() else _report(err)
     finally:
         np.seterr(**errors)
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _interrupted(said: list[str]) -> int:
+    from .core.interrupts import forget_interrupts
+
+    forget_interrupts()
+    said.append("interrupted")
+    _say("interrupted; files already written are complete")
+    return 130
+
+
+def _report(err: Exception) -> int:
+    """Say the one-line message of an error and return its exit status (2 input, 1 computation/output, 3 bug)."""
+    from .core.errors import ComputationError, ConfigError, OutputError, one_line  # after parsing: ``--help``
+
+    if isinstance(err, ConfigError):
+        _say(f"error: {one_line(str(err), 600)}")
+        return 2
+    if isinstance(err, (ComputationError, OutputError)):
+        _say(f"error: {one_line(str(err), 600)}")
+        return 1
+    if isinstance(err, MemoryError):
+        _say("error: out of memory; lower the problem size (or --max-memory, the budget checked before starting)")
+        return 1
+    if os.environ.get("MOBISENSE_TRACEBACK"):
+        raise err
+    _say(f"internal error: {one_line(f'{type(err).__name__}: {err}', 300)} (a bug: please report it with "
+         "the input; MOBISENSE_TRACEBACK=1 shows the traceback)")  # fmt: skip
+    return 3
 
 
 def _main_thread() -> bool:

@@ -1,4 +1,13 @@
-"""Critical sections that Ctrl-C and SIGTERM cannot split: the signal is held and acted on right after."""
+"""Ctrl-C and SIGTERM that are never lost: recorded when they arrive, held in critical sections, acted on after.
+
+A ``KeyboardInterrupt`` raised by a signal handler while CasADi's Python bindings are running (the handler
+runs inside the ``DM_from_array`` typemap while an argument is converted, for example) is swallowed by the
+binding, which tries the next overload and carries on, or resurfaces later as a stray error at interpreter
+exit; the same happens inside CasADi callbacks during Ipopt (casadi/casadi#2006). So the command's handler
+(:func:`interrupt_handler`) records the signal, raises at once only when no CasADi frame is on the stack, and
+the places where work is handed to CasADi (every Ipopt call, every Newton step of the indirect method, the end
+of a command) call :func:`raise_if_interrupted`: an interrupt that arrived inside CasADi is acted on there.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +17,62 @@ import threading
 from collections.abc import Iterator
 from typing import Any
 
-__all__ = ["Deferred", "deferred_interrupts"]
+__all__ = [
+    "Deferred",
+    "deferred_interrupts",
+    "forget_interrupts",
+    "interrupt_handler",
+    "interrupt_received",
+    "raise_if_interrupted",
+]
+
+_received: list[int] = []  # signals recorded by interrupt_handler/hold and not yet acted on
+
+
+def interrupt_handler(signum: int, frame: Any) -> None:
+    """The signal handler of SIGINT and SIGTERM for a command: record the signal, raise ``KeyboardInterrupt``.
+
+    Inside CasADi's bindings the exception would be swallowed: there it is only recorded, and raised by the
+    next :func:`raise_if_interrupted`.
+    """
+    _received.append(signum)
+    if not _inside_casadi(frame):
+        raise KeyboardInterrupt
+
+
+def _inside_casadi(frame: Any) -> bool:
+    while frame is not None:
+        if str(frame.f_globals.get("__name__", "")).startswith("casadi"):
+            return True
+        frame = frame.f_back
+    return False
+
+
+def raise_if_interrupted() -> None:
+    """Raise ``KeyboardInterrupt`` if SIGINT or SIGTERM arrived (recorded inside CasADi, or swallowed there).
+
+    The record stays until :func:`forget_interrupts`: an error that the interrupt causes further on is still
+    recognised as its doing.
+    """
+    if _received:
+        raise KeyboardInterrupt
+
+
+def interrupt_received() -> bool:
+    """Whether SIGINT or SIGTERM arrived since the record was last cleared."""
+    return bool(_received)
+
+
+def forget_interrupts() -> None:
+    """Clear the record: the ``KeyboardInterrupt`` raised for it has been handled.
+
+    Also clears CPython's own record of an unhandled ``KeyboardInterrupt``. A ``KeyboardInterrupt`` that passes
+    through code run by ``exec`` of a string (``dataclasses`` builds every ``__init__`` that way) sets it even
+    when the exception is caught later, and the interpreter then ends by killing itself with SIGINT instead of
+    returning the command's exit status 130. Every ``exec`` of a string resets it first; this one succeeds.
+    """
+    _received.clear()
+    exec("None")  # noqa: S102  (a constant string: resets CPython's unhandled-KeyboardInterrupt flag)
 
 
 class Deferred:
@@ -18,10 +82,11 @@ class Deferred:
         self.received: int | None = None
 
     def check(self) -> None:
-        """Raise ``KeyboardInterrupt`` if SIGINT or SIGTERM arrived."""
+        """Raise ``KeyboardInterrupt`` if SIGINT or SIGTERM arrived (held here, or recorded and swallowed)."""
         if self.received is not None:
             self.received = None
             raise KeyboardInterrupt
+        raise_if_interrupted()
 
 
 @contextlib.contextmanager
@@ -39,6 +104,7 @@ def deferred_interrupts(raise_at_exit: bool = True) -> Iterator[Deferred]:
 
     def hold(signum: int, frame: Any) -> None:
         deferred.received = signum
+        _received.append(signum)  # an error raised in the block before it ends is reported as the interrupt
 
     previous = {sig: signal.signal(sig, hold) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:

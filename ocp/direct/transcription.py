@@ -20,7 +20,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from ...core.interrupts import deferred_interrupts
+from ...core.interrupts import deferred_interrupts, raise_if_interrupted
 from .. import collocation, model, noise_models, path_constraints, state_layout
 from ..collocation import CollocationScheme
 from ..model import SensorKalmanModel, Structure
@@ -248,7 +248,9 @@ class DirectCollocation:
             args.update(lam_x0=lam_w0, lam_g0=lam_g0)
         t0 = time.perf_counter()
         # Ctrl-C/SIGTERM during Ipopt: CasADi's callback wrapper can swallow the KeyboardInterrupt and the solve
-        # runs on (casadi/casadi#2006); the signal is held and raised once Ipopt returns, so it is never lost
+        # runs on (casadi/casadi#2006); the signal is held and raised once Ipopt returns, so it is never lost.
+        # One that arrived while the NLP was being built inside CasADi was recorded: it stops the solve here
+        raise_if_interrupted()
         with deferred_interrupts():
             sol = solver(**args)
         elapsed = time.perf_counter() - t0

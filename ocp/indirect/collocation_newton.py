@@ -28,6 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
+from ...core.interrupts import raise_if_interrupted
 from ..collocation import CollocationScheme
 from ..model import Structure
 from .hamiltonian import HamiltonianSystem, hamiltonian_system
@@ -69,6 +70,7 @@ def newton(
     F, J = residual(X)
     norm = float(np.abs(F).max())
     for iteration in range(max_iterations + 1):
+        raise_if_interrupted()  # the residual is evaluated by CasADi, whose bindings can swallow a Ctrl-C
         if not np.isfinite(norm):
             return NewtonResult(X, False, iteration, norm, "non-finite residual", time.perf_counter() - t_start)
         if norm <= tolerance:
