@@ -55,5 +55,24 @@ def test_solve_imports_no_xarray_pandas_dask(tmp_path):
 
 @pytest.mark.slow
 def test_solve_with_figures_imports_no_xarray_pandas_dask(tmp_path):
+    # the figures are drawn by worker processes (mobisense.ocp.figure_workers): the command imports no matplotlib
     modules = imported_by("solve", HUSSEIN, "--quiet", "--intervals", "20", "--plot", "paths", "--out", str(tmp_path))
+    assert not modules & {"matplotlib", *DATA_STACK}
+    assert (tmp_path / "paths.png").is_file() and not (tmp_path / "covariance.png").exists()
+
+
+def test_a_figure_worker_imports_matplotlib_and_no_data_stack():
+    code = (
+        "import json, runpy, sys\n"
+        "sys.argv = ['figure_workers']\n"
+        "try:\n"
+        "    runpy.run_module('mobisense.ocp.figure_workers', run_name='__main__')\n"
+        "except SystemExit as end:\n"
+        "    assert end.code == 0, end.code\n"
+        "print(json.dumps(sorted({m.split('.')[0] for m in sys.modules})))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], input="", capture_output=True, text=True, cwd=ROOT, check=True)
+    lines = out.stdout.strip().splitlines()
+    assert len(lines) == 1  # no job (the command ended without a solution): no answer, nothing drawn
+    modules = set(json.loads(lines[0]))
     assert "matplotlib" in modules and not modules & DATA_STACK
