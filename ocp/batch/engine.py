@@ -4,7 +4,8 @@ Tasks carry plain data (problem dicts, numpy arrays), never CasADi objects; each
 transcription of a problem structure (:func:`mobisense.ocp.direct.solver.transcription_for`) and re-solves it with new
 parameters. Warm-started tasks run in chains of neighbours, one per worker (:mod:`mobisense.ocp.batch.chains`): each
 task is started on its worker from its predecessor's primal–dual point (re-scaled by
-:meth:`DirectCollocation.transfer`), without a round trip through the client. A task that raises, or whose worker
+:meth:`DirectCollocation.transfer`), without a round trip through the client, and one dask task solves a link of
+up to :data:`~mobisense.ocp.batch.chains.LINK_TASKS` consecutive tasks. A task that raises, or whose worker
 dies more often than dask retries, becomes a row with ``status = "error"``; nothing stops the sweep.
 """
 
@@ -19,14 +20,14 @@ import numpy as np
 
 from ...core.errors import ConfigError
 from ...core.interrupts import deferred_interrupts
-from .chains import cut_chains, snake_order, solve_in_chain
+from .chains import chain_links, cut_chains, snake_order, solve_chain_link
 from .cluster import CONNECT_TIMEOUT
 from .worker import solve_task
 
 __all__ = ["open_client", "run_tasks", "nearest_seed", "CHAIN_AHEAD"]
 
-#: tasks of one chain submitted ahead of its results
-CHAIN_AHEAD = 16
+#: links of one chain submitted ahead of their results (a link is up to LINK_TASKS tasks)
+CHAIN_AHEAD = 4
 
 
 @contextlib.contextmanager
@@ -150,28 +151,29 @@ def run_tasks(
     keys = structure_keys or [None] * n
     coords = coordinates or [np.zeros(1)] * n
     workers = sorted(client.scheduler_info().get("workers", {})) or [None]
-    if warm_start:
-        queues = [iter(chain) for chain in cut_chains(snake_order(coords, keys), len(workers))]
+    if warm_start:  # each queue: one chain's links (lists of consecutive tasks), solved by one dask task each
+        queues = [iter(chain_links(chain)) for chain in cut_chains(snake_order(coords, keys), len(workers))]
     else:
-        queues = [iter(range(n))]
-    # a chain's next tasks wait on its worker (their payloads are small), so that the worker never waits for the
+        queues = [iter([i] for i in range(n))]
+    # a chain's next links wait on its worker (their payloads are small), so that the worker never waits for the
     # client (busy writing a batch of results); cold tasks are queued two per worker
     limit = CHAIN_AHEAD if warm_start else in_flight or 2 * len(workers)
-    futures: dict[Any, tuple[int, int]] = {}  # future -> (task, queue)
-    last: dict[int, Any] = {}  # queue -> its latest future (a chain's next task depends on it)
+    futures: dict[Any, tuple[list[int], int]] = {}  # future -> (its tasks, queue)
+    last: dict[int, Any] = {}  # queue -> its latest future (a chain's next link depends on it)
     pending = [0] * len(queues)
 
     def submit_next(q: int) -> bool:
-        i = next(queues[q], None)
-        if i is None:
+        tasks = next(queues[q], None)
+        if tasks is None:
             return False
-        key = f"task-{i}-{time.time_ns()}"
+        key = f"task-{tasks[0]}-{time.time_ns()}"
         if warm_start:
             pin = {"workers": [workers[q % len(workers)]], "allow_other_workers": True} if workers[0] else {}
-            future = client.submit(solve_in_chain, payloads[i], last.get(q), pure=False, key=key, **pin)
+            link = [payloads[i] for i in tasks]
+            future = client.submit(solve_chain_link, link, last.get(q), pure=False, key=key, **pin)
         else:
-            future = client.submit(solve_task, payloads[i], pure=False, key=key)
-        futures[future] = (i, q)
+            future = client.submit(solve_task, payloads[tasks[0]], pure=False, key=key)
+        futures[future] = (tasks, q)
         last[q] = future
         pending[q] += 1
         return True
@@ -183,14 +185,15 @@ def run_tasks(
         while futures:
             done = _wait_some(list(futures), deferred)
             for future in done:
-                i, q = futures.pop(future)
+                tasks, q = futures.pop(future)
                 pending[q] -= 1
                 try:
-                    result = future.result()
+                    results = future.result() if warm_start else [future.result()]
                 except Exception as exc:  # noqa: BLE001  (a task's failure is data, not a crash of the sweep)
-                    result = {"row": {"status": "error", "error": f"{type(exc).__name__}: {exc}"}}
-                result.pop("carry", None)
-                on_result(i, result)
+                    results = [{"row": {"status": "error", "error": f"{type(exc).__name__}: {exc}"}} for _ in tasks]
+                for i, result in zip(tasks, results, strict=True):  # a link's rows are all kept, then Ctrl-C
+                    result.pop("carry", None)
+                    on_result(i, result)
                 deferred.check()
                 while pending[q] < limit and submit_next(q):
                     pass

@@ -8,7 +8,7 @@ import xarray as xr
 
 from mobisense.core.files import write_netcdf
 from mobisense.core.netcdf import open_dataset
-from mobisense.ocp.batch.chains import cut_chains, snake_order
+from mobisense.ocp.batch.chains import chain_links, cut_chains, snake_order, solve_chain_link
 from mobisense.ocp.task_files import shape_key, stack_tasks, task_dataset
 
 
@@ -60,3 +60,29 @@ def test_snake_order_visits_grid_neighbours_and_keeps_structures_together():
     chains = cut_chains(order, 5)
     assert [len(c) for c in chains] == [2, 3, 2, 3, 2] and sum(chains, []) == order
     assert cut_chains(order[:1], 4) == [order[:1]]
+
+
+def test_chain_links_double_up_to_the_longest_and_keep_the_order():
+    chain = list(range(30, 0, -1))
+    links = chain_links(chain, longest=8)
+    assert [len(link) for link in links] == [1, 2, 4, 8, 8, 7] and sum(links, []) == chain
+    assert chain_links([5], longest=8) == [[5]] and chain_links([]) == []
+    assert [len(link) for link in chain_links(list(range(5)), longest=1)] == [1] * 5
+
+
+def test_a_chain_link_starts_each_task_from_the_one_before(monkeypatch):
+    import mobisense.ocp.batch.worker as worker
+
+    seen = []
+
+    def fake_solve(payload):  # records the seed it was given; converges to its own label (or fails on "bad")
+        seen.append(payload["seed"])
+        if payload["problem"] == "bad":
+            raise RuntimeError("no")
+        return {"row": {"status": "solved"}, "nlp": payload["problem"]}
+
+    monkeypatch.setattr(worker, "solve_task", fake_solve)
+    results = solve_chain_link([{"problem": p} for p in ("a", "b", "bad", "c")], [{"carry": "start"}])
+    assert seen == ["start", "a", "b", "b"]  # after a failure the next task starts from the point before it
+    assert [r["row"]["status"] for r in results] == ["solved", "solved", "error", "solved"]
+    assert ["carry" in r for r in results] == [False, False, False, True] and results[-1]["carry"] == "c"
