@@ -26,7 +26,7 @@ __all__ = [
     "raise_if_interrupted",
 ]
 
-_received: list[int] = []  # signals recorded by interrupt_handler/hold and not yet acted on
+_received: list[int] = []  # signals recorded by interrupt_handler/_hold, until forget_interrupts
 
 
 def interrupt_handler(signum: int, frame: Any) -> None:
@@ -76,17 +76,20 @@ def forget_interrupts() -> None:
 
 
 class Deferred:
-    """The interrupt received inside :func:`deferred_interrupts`, if any."""
-
-    def __init__(self) -> None:
-        self.received: int | None = None
+    """The handle of a :func:`deferred_interrupts` block: :meth:`check` acts on a signal held in it."""
 
     def check(self) -> None:
         """Raise ``KeyboardInterrupt`` if SIGINT or SIGTERM arrived (held here, or recorded and swallowed)."""
-        if self.received is not None:
-            self.received = None
-            raise KeyboardInterrupt
         raise_if_interrupted()
+
+
+def _hold(signum: int, frame: Any) -> None:
+    """The handler inside :func:`deferred_interrupts`: record the signal, do not raise.
+
+    :meth:`Deferred.check` raises it after the block; an error raised in the block before then is reported as
+    the interrupt.
+    """
+    _received.append(signum)
 
 
 @contextlib.contextmanager
@@ -102,11 +105,7 @@ def deferred_interrupts(raise_at_exit: bool = True) -> Iterator[Deferred]:
         yield deferred
         return
 
-    def hold(signum: int, frame: Any) -> None:
-        deferred.received = signum
-        _received.append(signum)  # an error raised in the block before it ends is reported as the interrupt
-
-    previous = {sig: signal.signal(sig, hold) for sig in (signal.SIGINT, signal.SIGTERM)}
+    previous = {sig: signal.signal(sig, _hold) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield deferred
     finally:
