@@ -15,7 +15,6 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "distinct_optima": "mobisense.ocp.batch.multistart",
         "open_client": "mobisense.ocp.batch.engine",
         "run_tasks": "mobisense.ocp.batch.engine",
-        "nearest_seed": "mobisense.ocp.batch.engine",
         "solve_task": "mobisense.ocp.batch.worker",
     },
 )

@@ -24,7 +24,7 @@ from .chains import chain_links, cut_chains, snake_order, solve_chain_link
 from .cluster import CONNECT_TIMEOUT
 from .worker import solve_task
 
-__all__ = ["open_client", "run_tasks", "nearest_seed", "CHAIN_AHEAD"]
+__all__ = ["open_client", "run_tasks", "CHAIN_AHEAD"]
 
 #: links of one chain submitted ahead of their results (a link is up to LINK_TASKS tasks)
 CHAIN_AHEAD = 4
@@ -119,12 +119,6 @@ def _probe(address: str) -> None:
             header += chunk
     if not 0 < struct.unpack("<Q", header)[0] < 2**20:
         raise OSError("the port answers, but not with the dask protocol")
-
-
-def nearest_seed(seeds: list[tuple[Any, np.ndarray, dict]], key: Any, point: np.ndarray) -> dict | None:
-    """The NLP point of the finished task nearest to ``point`` among ``seeds`` of structure ``key`` (or None)."""
-    candidates = [(np.linalg.norm(coords - point), nlp) for k, coords, nlp in seeds if k == key]
-    return min(candidates, key=lambda c: c[0])[1] if candidates else None
 
 
 def run_tasks(
