@@ -32,6 +32,7 @@ import shutil
 import subprocess
 import sys
 import time
+from collections.abc import Iterable
 from pathlib import Path
 
 import casadi as ca
@@ -148,11 +149,7 @@ def load_compiled(
         return functions, _start_background(functions, folder, digest, full_key, compiler)
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        source = folder / f".kernels_{digest}.{os.getpid()}.c"
-        generator = ca.CodeGenerator(f"kernels_{digest}.c", {"with_header": False})
-        for f in functions.values():
-            generator.add(f)
-        source.write_text(generator.dump(), encoding="utf-8")
+        source = _write_source(functions.values(), library)
     except OSError as err:
         return functions, f"virtual machine (cache folder {folder} not writable: {err.strerror})"
     failure = _compile(source, library, full_key, compiler)
@@ -162,6 +159,16 @@ def load_compiled(
     if loaded is None:
         return functions, "virtual machine (the compiled library could not be loaded)"
     return loaded, "compiled"
+
+
+def _write_source(functions: Iterable[ca.Function], library: Path) -> Path:
+    """Generate the C of ``functions`` beside ``library`` (a temporary file of this process); its path."""
+    generator = ca.CodeGenerator(f"{library.stem}.c", {"with_header": False})
+    for f in functions:
+        generator.add(f)
+    source = library.with_name(f".{library.stem}.{os.getpid()}.c")
+    source.write_text(generator.dump(), encoding="utf-8")
+    return source
 
 
 def _compile(source: Path, library: Path, full_key: str, compiler: str) -> str | None:
@@ -230,11 +237,7 @@ def compile_library(library: Path, full_key: str, compiler: str, saved: list[Pat
     library = Path(library)
     marker = library.with_name(f".{library.stem}.building")
     try:
-        generator = ca.CodeGenerator(f"{library.stem}.c", {"with_header": False})
-        for path in saved:
-            generator.add(ca.Function.load(str(path)))
-        source = library.with_name(f".{library.stem}.{os.getpid()}.c")
-        source.write_text(generator.dump(), encoding="utf-8")
+        source = _write_source([ca.Function.load(str(path)) for path in saved], library)
         return _compile(source, library, full_key, compiler)
     except (OSError, RuntimeError) as err:
         return str(err)
