@@ -131,22 +131,25 @@ class Replanner:
     def prepare(self, instants: np.ndarray) -> float:
         """Build the transcriptions of the windows at re-plan ``instants`` (T) before flying; wall time (s)."""
         start = time.perf_counter()
-        sensors = self.problem.sensors
-        p, v = (np.array([getattr(s, key) for s in sensors], float) for key in ("p0", "v0"))
-        Sigma0 = self.problem.matrices()["Sigma0"]
+        p, v, Sigma0 = self._initial_state()
         for t in instants:
             t_end, K = self.window(float(t))
             self.transcription(window_problem(self.problem, float(t), t_end, p, v, Sigma0, K))
         return time.perf_counter() - start
 
+    def _initial_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The problem's own start: positions (N, 2), velocities (N, 2) and Σ0 (n, n)."""
+        sensors = self.problem.sensors
+        p, v = (np.array([getattr(s, key) for s in sensors], float) for key in ("p0", "v0"))
+        return p, v, self.problem.matrices()["Sigma0"]
+
     def first_plan(self) -> Any:
         """The plan over the first window (the problem's solve strategy)."""
         from .direct.solver import solve_direct
 
-        h, sensors = self.problem.horizon, self.problem.sensors
-        t_end, K = self.window(h.t0)
-        p, v = (np.array([getattr(s, key) for s in sensors], float) for key in ("p0", "v0"))
-        sub = window_problem(self.problem, h.t0, t_end, p, v, self.problem.matrices()["Sigma0"], K, strategy=None)
+        t0 = self.problem.horizon.t0
+        t_end, K = self.window(t0)
+        sub = window_problem(self.problem, t0, t_end, *self._initial_state(), K, strategy=None)
         return solve_direct(sub, transcription=self.transcription(sub))
 
     def solve(self, previous: Any, t: float, p: np.ndarray, v: np.ndarray, Sigma: np.ndarray) -> Any:
