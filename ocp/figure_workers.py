@@ -125,7 +125,7 @@ class FigureWorkers:
 
             raise (OutputError if reply.get("kind") == "OutputError" else RuntimeError)(reply["error"])
         written = [Path(p) for p in reply["written"]]
-        return sorted(written, key=lambda p: self._order.index(p.name) if p.name in self._order else len(p.name))
+        return sorted(written, key=lambda p: self._order.index(p.name))  # every file is one of the figures sent
 
     def close(self) -> None:
         """End the worker if it still runs (SIGTERM: it ends its drawing processes, all remove temporaries)."""

@@ -61,8 +61,6 @@ def _key(variables: dict[str, Any]) -> tuple[Any, ...]:
 
 def _parts(dataset: Any) -> tuple[dict[str, Any], set[str], dict[str, Any]]:
     """``(variables: name -> (dims, values, attrs), coordinate names, global attributes)`` of either kind."""
-    from ..core.netcdf_writer import DatasetContent
-
     if isinstance(dataset, DatasetContent):
         table = {**dataset.data_vars, **dataset.coords}
         variables = {str(k): (tuple(d), np.asarray(v), a) for k, (d, v, a) in table.items()}
@@ -93,8 +91,6 @@ def stack_tasks(datasets: list[Any], indices: list[int], task_ids: list[str]) ->
     DatasetContent
         The stacked file's content (``.to_xarray()`` for a Dataset); built without importing xarray.
     """
-    from ..core.netcdf_writer import DatasetContent
-
     parts = [_parts(ds) for ds in datasets]
     first, coord_names, _ = parts[0]
     key = _key(first)
