@@ -19,6 +19,7 @@ import h5py
 import numpy as np
 import pytest
 import xarray as xr
+import yaml
 
 from mobisense.core import netcdf
 from mobisense.core.files import write_netcdf
@@ -138,8 +139,12 @@ def test_a_solution_file_is_the_file_xarray_writes(method, tmp_path, monkeypatch
     import short_runs
 
     solution = short_runs.small_solution(method)
-    ds = assert_same_file(solution.to_content(), tmp_path, monkeypatch)
+    content = solution.to_content()
+    ds = assert_same_file(content, tmp_path, monkeypatch)
     assert ("indirect_p" in ds) == (method == "both")
+    # problem_yaml goes through libyaml's emitter (speed): the text of PyYAML's own safe_dump, character for character
+    expected = yaml.safe_dump(solution.problem.normalised(), sort_keys=False, allow_unicode=True)
+    assert content.attrs["problem_yaml"] == expected
 
 
 @pytest.mark.slow
