@@ -1,15 +1,16 @@
 """A CF-1.10 netCDF-4 writer that needs neither xarray nor pandas: :class:`DatasetContent` and :func:`write_content`.
 
 Importing xarray costs about a second of a command's life (pandas, and through xarray's duck-array checks
-dask and distributed); writing the file needs only h5netcdf. :class:`DatasetContent` holds what an
+dask and distributed); writing the file needs only h5py. :class:`DatasetContent` holds what an
 ``xarray.Dataset`` would — data variables, coordinates, global attributes, as ``(dims, numpy array,
-attrs)`` — and :func:`write_content` writes it through h5netcdf's own API exactly as
+attrs)`` — and :func:`write_content` writes it (through :mod:`mobisense.core.netcdf4_layout`, or h5netcdf's
+own API for what that does not cover) exactly as
 ``mobisense.core.files.write_netcdf(path, content.to_xarray())`` does: the rules of
 :func:`mobisense.core.netcdf.prepare` (global attributes, string labels as ``<dim>_label`` character
 variables, no ``_FillValue`` on coordinates), and xarray's encoding (``_FillValue = NaN`` on floating-point
 data variables, the ``coordinates`` attribute naming the auxiliary coordinates of each variable,
 characters with ``_Encoding = "utf-8"`` on a ``string<n>`` dimension). ``xarray.open_dataset`` reads either
-file as the same Dataset (tests/cli/test_netcdf_writer.py compares them).
+file as the same Dataset (tests/core/test_netcdf_writer.py compares them).
 
 Supported: numeric (integer, floating-point) data variables and coordinates, text (unicode) data variables,
 and string-valued index coordinates; anything else is a ``TypeError`` (write it with
@@ -26,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from .netcdf import global_attributes, label_coordinate
+from .netcdf4_layout import supports, write_netcdf4
 
 __all__ = ["DatasetContent", "write_content"]
 
@@ -79,8 +81,6 @@ def write_content(path: str | Path, content: DatasetContent) -> None:
     content : DatasetContent
         Data variables, coordinates and global attributes (see the module notes for what is supported).
     """
-    import h5netcdf
-
     data_vars, coords = _checked(content.data_vars, "data variable"), _checked(content.coords, "coordinate")
     coords = _with_labels(coords)
     variables = {**data_vars, **coords}
@@ -99,14 +99,23 @@ def write_content(path: str | Path, content: DatasetContent) -> None:
     attrs = global_attributes(content.attrs)
     if unlisted and "coordinates" not in attrs:  # as xarray: coordinates of no variable, named globally
         attrs["coordinates"] = " ".join(unlisted)
+    stored = [
+        (name, dims, values, list(_with_coordinates(variable_attrs, listed[name])), fillvalue)
+        for name, (dims, values, variable_attrs, fillvalue) in encoded.items()
+    ]
+    if supports(dimensions, stored, attrs):
+        write_netcdf4(path, attrs, dimensions, stored)
+        return
+    import h5netcdf
+
     with h5netcdf.File(path, mode="w", format="NETCDF4") as f:
         for key, value in attrs.items():
             f.attrs[key] = value
         f.dimensions = dimensions
-        for name, (dims, values, variable_attrs, fillvalue) in encoded.items():
+        for name, dims, values, variable_attrs, fillvalue in stored:
             variable = f.create_variable(name, dims, dtype=values.dtype, fillvalue=fillvalue)
             variable[...] = values
-            for key, value in _with_coordinates(variable_attrs, listed[name]):
+            for key, value in variable_attrs:
                 variable.attrs[key] = value
 
 

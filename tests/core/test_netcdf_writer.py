@@ -4,8 +4,11 @@ Each case writes one :class:`DatasetContent` twice — through xarray (``write_n
 content.to_xarray())``, the writer every other file uses) and through h5netcdf alone
 (``write_netcdf(path, content)``) — and compares the two files read back with ``xarray.open_dataset``
 (``assert_identical``: variables, dimensions, coordinates, dtypes, every attribute) and, below xarray, every
-HDF5 dataset's shape, dtype, fill value and attributes (except the object references of the dimension
-scales, which differ by address only). ``history`` holds the clock time, so it is fixed for the comparison.
+HDF5 dataset's shape, dtype, fill value, chunking and attributes (except the object references of the
+dimension scales, which differ by address only, and ``_NCProperties``, which names the library that wrote the
+file: h5netcdf, or mobisense's h5py writer :mod:`mobisense.core.netcdf4_layout`), and netCDF-C (netCDF4) reads
+both files as the same variables, dimensions, values and attributes. ``history`` holds the clock time, so it is
+fixed for the comparison.
 """
 
 from __future__ import annotations
@@ -30,10 +33,14 @@ REFERENCES = ("DIMENSION_LIST", "REFERENCE_LIST")
 
 
 def _layout(path: Path) -> dict[str, object]:
-    """Every HDF5 object's shape, dtype, fill value and attributes (as text), and the global attributes."""
+    """Every HDF5 object's shape, dtype, fill value and attributes (as text), the global attributes, and which
+    library wrote the file (``provenance``: the key after ``version=2`` in ``_NCProperties``)."""
     out: dict[str, object] = {}
     with h5py.File(path) as f:
-        out["/"] = {k: (repr(v), str(f.attrs.get_id(k).dtype)) for k, v in f.attrs.items()}
+        out["/"] = {k: (repr(v), str(f.attrs.get_id(k).dtype)) for k, v in f.attrs.items() if k != "_NCProperties"}
+        properties = f.attrs["_NCProperties"].decode("ascii").split(",")
+        assert properties[0] == "version=2" and any(p.startswith("hdf5=") for p in properties), properties
+        out["provenance"] = properties[1].split("=")[0]
 
         def visit(name: str, obj: h5py.Dataset) -> None:
             attrs = {k: (repr(v), str(obj.attrs.get_id(k).dtype)) for k, v in obj.attrs.items() if k not in REFERENCES}
@@ -44,8 +51,27 @@ def _layout(path: Path) -> dict[str, object]:
     return out
 
 
-def assert_same_file(content: DatasetContent, folder: Path, monkeypatch: pytest.MonkeyPatch) -> xr.Dataset:
-    """Write ``content`` both ways; assert the files are the same; return the dataset read back."""
+def _as_netcdf_c_reads_it(path: Path) -> dict[str, object]:
+    """Dimensions, and each variable's dimensions, dtype, values and attributes, as netCDF-C reads the file."""
+    import netCDF4
+
+    with netCDF4.Dataset(path) as f:
+        f.set_auto_mask(False)
+        dims = {name: len(dim) for name, dim in f.dimensions.items()}
+        variables = {
+            name: (v.dimensions, str(v.dtype), v[...].tobytes(), {k: repr(v.getncattr(k)) for k in v.ncattrs()})
+            for name, v in f.variables.items()
+        }
+        attrs = {k: repr(f.getncattr(k)) for k in f.ncattrs()}
+    return {"dimensions": dims, "variables": variables, "attrs": attrs}
+
+
+def assert_same_file(
+    content: DatasetContent, folder: Path, monkeypatch: pytest.MonkeyPatch, fast: bool = True
+) -> xr.Dataset:
+    """Write ``content`` both ways; assert the files are the same; return the dataset read back.
+
+    ``fast``: the content is of the kind the h5py writer covers (otherwise h5netcdf writes it)."""
     monkeypatch.setattr(netcdf, "_history", lambda: "2026-01-01T00:00:00Z: test (mobisense)")
     by_xarray, by_h5netcdf = folder / "xarray.nc", folder / "h5netcdf.nc"
     write_netcdf(by_xarray, content.to_xarray())
@@ -59,7 +85,11 @@ def assert_same_file(content: DatasetContent, folder: Path, monkeypatch: pytest.
             ), name
         assert list(a.variables) == list(b.variables)
         loaded = b.load()
-    assert _layout(by_xarray) == _layout(by_h5netcdf)
+    expected, written = _layout(by_xarray), _layout(by_h5netcdf)
+    assert expected.pop("provenance") == "h5netcdf"
+    assert written.pop("provenance") == ("mobisense" if fast else "h5netcdf")
+    assert expected == written
+    assert _as_netcdf_c_reads_it(by_xarray) == _as_netcdf_c_reads_it(by_h5netcdf)
     return loaded
 
 
@@ -170,3 +200,15 @@ def test_text_variables_and_a_stacked_sweep_file_are_written_as_xarray_writes_th
     ds = assert_same_file(stacked, tmp_path, monkeypatch)
     assert list(ds["task_id"].values) == ["a1b2", "c3d4e5"]
     assert json.loads(str(ds["task_attrs"].values[1]))["title"] == "another — ü"
+
+
+def test_a_size_0_dimension_is_left_to_h5netcdf_and_written_as_xarray_writes_it(tmp_path, monkeypatch):
+    # h5netcdf makes a size-0 dimension unlimited (chunked, resizable); the h5py writer does not imitate that
+    from mobisense.core import netcdf4_layout
+
+    content = _synthetic()
+    content.add_variable("no_zones", ("zone",), np.zeros(0), {"long_name": "no zone", "units": "m"})
+    calls = []
+    monkeypatch.setattr(netcdf4_layout, "write_netcdf4", lambda *a: calls.append(a))
+    ds = assert_same_file(content, tmp_path, monkeypatch, fast=False)
+    assert calls == [] and ds.sizes["zone"] == 0
