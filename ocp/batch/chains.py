@@ -3,9 +3,11 @@
 A warm start is only as good as the neighbour it comes from, and handing each finished point back through the
 client costs a dask round trip per task. So the client orders the tasks along the sweep's grid (tasks of one
 problem structure together; within one, a boustrophedon — snake — over the sorted varied values, so that
-consecutive tasks differ in one value by one step), cuts that path into one contiguous chain per worker, and
-submits each chain as dependent dask tasks pinned to its worker: every task receives its predecessor's result on
-the worker itself and starts from its primal–dual point, while the client only collects the results. One dask
+consecutive tasks differ in one value by one step), cuts that path into one contiguous piece per worker, pairs
+the pieces so that two chains run outwards from one cold head (:func:`pair_chains`), and submits each chain as
+dependent dask tasks pinned to its worker: every task receives its predecessor's result on the worker itself
+(the second chain of a pair receives the head's, once) and starts from its primal–dual point, while the client
+only collects the results. One dask
 task solves a *link* of consecutive tasks (:func:`chain_links`: 1, 2, 4, then :data:`LINK_TASKS` at a time), so
 that dask's round trip (≈ 20 ms on two cores) is paid once per link, not once per warm solve (≈ 10 ms).
 """
@@ -16,7 +18,15 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["LINK_TASKS", "snake_order", "cut_chains", "chain_links", "solve_in_chain", "solve_chain_link"]
+__all__ = [
+    "LINK_TASKS",
+    "snake_order",
+    "cut_chains",
+    "pair_chains",
+    "chain_links",
+    "solve_in_chain",
+    "solve_chain_link",
+]
 
 #: the most tasks one dask task of a chain solves (the first links are shorter: results come early)
 LINK_TASKS = 8
@@ -52,18 +62,20 @@ def snake_order(coordinates: list[np.ndarray], keys: list[Any] | None = None) ->
 
 
 def _snake(matrix: np.ndarray, members: list[int], dim: int, reverse: bool) -> list[int]:
-    """Sort ``members`` by column ``dim``, each group of equal values by the next columns, alternating direction."""
+    """Sort ``members`` by column ``dim``, each group of equal values by the next columns, alternating direction.
+
+    The boustrophedon of the grid: the ``k``-th value of column ``dim`` (ascending) is crossed forwards in the
+    next columns when ``k`` is even, backwards when odd; a ``reverse`` walk is the forward one backwards (so
+    consecutive tasks still differ in one column by one step, whatever the number of values in each column).
+    """
     if dim == matrix.shape[1] or len(members) <= 1:
         return members[::-1] if reverse else members
     values = matrix[members, dim]
-    levels = np.unique(values)
-    if reverse:
-        levels = levels[::-1]
     out: list[int] = []
-    for k, level in enumerate(levels):
+    for k, level in enumerate(np.unique(values)):
         group = [m for m, v in zip(members, values, strict=True) if v == level]
-        out += _snake(matrix, group, dim + 1, bool(k % 2) != reverse)
-    return out
+        out += _snake(matrix, group, dim + 1, bool(k % 2))
+    return out[::-1] if reverse else out
 
 
 def cut_chains(order: list[int], chains: int) -> list[list[int]]:
@@ -71,6 +83,33 @@ def cut_chains(order: list[int], chains: int) -> list[list[int]]:
     chains = max(1, min(chains, len(order)))
     bounds = np.linspace(0, len(order), chains + 1).round().astype(int)
     return [order[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b > a]
+
+
+def pair_chains(order: list[int], workers: int) -> list[tuple[list[int], int | None]]:
+    """Chains for ``workers`` workers that share cold heads: two chains run outwards from each head.
+
+    ``order`` is cut into one piece per worker (:func:`cut_chains`); the pieces are paired, and the pair
+    ``(P, Q)`` becomes the chain ``P`` backwards — its first task ``P[-1]`` solved cold, the *head* — and the
+    chain ``Q``, whose first task neighbours the head in ``order`` and starts from the head's solution. The
+    cold head costs about 60 warm tasks on the default problem, so one head per pair instead of one per
+    chain is most of a warm sweep's parallel speed-up; ``Q``'s worker waits for it (≈ one head), then both
+    run. An odd worker out keeps a piece with its own cold head.
+
+    Returns
+    -------
+    list of (chain, seeded_by)
+        Each chain's task positions in solving order, and the index (in this list) of the chain whose head
+        its first task starts from, or None for a chain that starts cold.
+    """
+    pieces = cut_chains(order, workers)
+    plan: list[tuple[list[int], int | None]] = []
+    for k in range(0, len(pieces), 2):
+        if k + 1 == len(pieces):
+            plan.append((pieces[k], None))
+            break
+        plan.append((pieces[k][::-1], None))
+        plan.append((pieces[k + 1], len(plan) - 1))
+    return plan
 
 
 def chain_links(chain: list[int], longest: int = LINK_TASKS) -> list[list[int]]:

@@ -20,7 +20,7 @@ import numpy as np
 
 from ...core.errors import ConfigError
 from ...core.interrupts import deferred_interrupts
-from .chains import chain_links, cut_chains, snake_order, solve_chain_link
+from .chains import chain_links, pair_chains, snake_order, solve_chain_link
 from .cluster import CONNECT_TIMEOUT
 from .worker import solve_task
 
@@ -134,7 +134,8 @@ def run_tasks(
 
     ``result`` is the worker's dict, or ``{"row": {"status": "error", "error": …}}`` if the task failed.
     With ``warm_start`` the tasks run in chains (:mod:`mobisense.ocp.batch.chains`): ordered along the
-    ``coordinates`` (grouped by ``structure_keys``), cut into one chain per worker, each task started on its
+    ``coordinates`` (grouped by ``structure_keys``), cut into one chain per worker, two chains running
+    outwards from each cold head (:func:`mobisense.ocp.batch.chains.pair_chains`), each task started on its
     worker from its predecessor's converged point; without, every task starts cold, at most ``in_flight``
     (default 2 × workers) at a time. Ctrl-C and SIGTERM are held while dask is waited on and raised
     (``KeyboardInterrupt``) between two results, never inside dask's own code.
@@ -145,8 +146,11 @@ def run_tasks(
     keys = structure_keys or [None] * n
     coords = coordinates or [np.zeros(1)] * n
     workers = sorted(client.scheduler_info().get("workers", {})) or [None]
+    seeded_by: list[int | None] = [None]
     if warm_start:  # each queue: one chain's links (lists of consecutive tasks), solved by one dask task each
-        queues = [iter(chain_links(chain)) for chain in cut_chains(snake_order(coords, keys), len(workers))]
+        plan = pair_chains(snake_order(coords, keys), len(workers))
+        queues = [iter(chain_links(chain)) for chain, _ in plan]
+        seeded_by = [seed for _, seed in plan]
     else:
         queues = [iter([i] for i in range(n))]
     # a chain's next links wait on its worker (their payloads are small), so that the worker never waits for the
@@ -154,6 +158,7 @@ def run_tasks(
     limit = CHAIN_AHEAD if warm_start else in_flight or 2 * len(workers)
     futures: dict[Any, tuple[list[int], int]] = {}  # future -> (its tasks, queue)
     last: dict[int, Any] = {}  # queue -> its latest future (a chain's next link depends on it)
+    heads: dict[int, Any] = {}  # queue -> its first future (the head the other chain of a pair starts from)
     pending = [0] * len(queues)
 
     def submit_next(q: int) -> bool:
@@ -164,7 +169,9 @@ def run_tasks(
         if warm_start:
             pin = {"workers": [workers[q % len(workers)]], "allow_other_workers": True} if workers[0] else {}
             link = [payloads[i] for i in tasks]
-            future = client.submit(solve_chain_link, link, last.get(q), pure=False, key=key, **pin)
+            before = last.get(q, heads.get(seeded_by[q]) if seeded_by[q] is not None else None)
+            future = client.submit(solve_chain_link, link, before, pure=False, key=key, **pin)
+            heads.setdefault(q, future)
         else:
             future = client.submit(solve_task, payloads[tasks[0]], pure=False, key=key)
         futures[future] = (tasks, q)

@@ -8,7 +8,7 @@ import xarray as xr
 
 from mobisense.core.files import write_netcdf
 from mobisense.core.netcdf import open_dataset
-from mobisense.ocp.batch.chains import chain_links, cut_chains, snake_order, solve_chain_link
+from mobisense.ocp.batch.chains import chain_links, cut_chains, pair_chains, snake_order, solve_chain_link
 from mobisense.ocp.task_files import shape_key, stack_tasks, task_dataset
 
 
@@ -54,6 +54,11 @@ def test_snake_order_visits_grid_neighbours_and_keeps_structures_together():
     assert sorted(order) == list(range(12))
     steps = [np.abs(coords[a] - coords[b]).sum() for a, b in zip(order, order[1:], strict=False)]
     assert steps == [1.0] * 11
+    # three columns, an even number of values in the middle one: the walk still moves one step at a time
+    cube = [np.array([i, j, k], float) for i in range(3) for j in range(4) for k in range(2)]
+    walk = snake_order(cube)
+    assert sorted(walk) == list(range(24))
+    assert [np.abs(cube[a] - cube[b]).sum() for a, b in zip(walk, walk[1:], strict=False)] == [1.0] * 23
     keys = ["A" if k % 2 else "B" for k in range(12)]
     grouped = snake_order(coords, keys)
     assert {keys[k] for k in grouped[:6]} == {"B"} and {keys[k] for k in grouped[6:]} == {"A"}
@@ -86,3 +91,17 @@ def test_a_chain_link_starts_each_task_from_the_one_before(monkeypatch):
     assert seen == ["start", "a", "b", "b"]  # after a failure the next task starts from the point before it
     assert [r["row"]["status"] for r in results] == ["solved", "solved", "error", "solved"]
     assert ["carry" in r for r in results] == [False, False, False, True] and results[-1]["carry"] == "c"
+
+
+def test_pair_chains_run_outwards_from_shared_heads():
+    order = list(range(100, 111))  # 11 tasks along the snake
+    plan = pair_chains(order, 2)
+    (a, seed_a), (b, seed_b) = plan
+    assert seed_a is None and seed_b == 0  # one cold head: the second chain starts from the first chain's head
+    assert a[0] + 1 == b[0] and a == list(range(a[0], 99, -1)) and b == list(range(b[0], 111))
+    assert sorted(a + b) == order and abs(len(a) - len(b)) <= 1
+    three = pair_chains(order, 3)  # an odd worker out keeps a chain with its own cold head
+    assert [seed for _, seed in three] == [None, 0, None] and sorted(sum((c for c, _ in three), [])) == order
+    four = pair_chains(order, 4)
+    assert [seed for _, seed in four] == [None, 0, None, 2]
+    assert pair_chains([7], 2) == [([7], None)]
