@@ -144,9 +144,10 @@ def _assemble(
     tr = run.tr
     P = run.parameters(max(run.eps, 1e-300))
 
-    def on_grid(w: np.ndarray) -> np.ndarray:
-        parts = tr.unpack(w, P)
+    def on_grid(parts: dict[str, np.ndarray]) -> np.ndarray:
         return np.concatenate([parts["xs"], parts["xc"].reshape(-1, tr.structure.nx)])[order]
+
+    accepted = tr.unpack(run.w, P)
 
     _, nodes = tr.times(problem.horizon.t0, problem.horizon.tf)
     costs = tuple(float(v) for v in tr.cost_terms(run.w, run.parameters(1.0)))
@@ -158,14 +159,14 @@ def _assemble(
         message,
         run.eps,
         t=coasting.t,
-        x=on_grid(run.w),
+        x=on_grid(accepted),
         t_u=nodes.ravel(),
-        u=tr.unpack(run.w, P)["u"].reshape(nodes.size, -1),
+        u=accepted["u"].reshape(nodes.size, -1),
         costs=costs,  # type: ignore[arg-type]
         t_costate=np.concatenate([[problem.horizon.t0], nodes.ravel()]),
         lam=lam,
         path_eps=np.array([e for e, _ in run.path]) if run.path else None,
-        path_x=np.stack([on_grid(w) for _, w in run.path]) if run.path else None,
+        path_x=np.stack([on_grid(tr.unpack(w, P)) for _, w in run.path]) if run.path else None,
         homotopy=run.ctx.steps,
         baseline={
             "cost": coasting.cost,

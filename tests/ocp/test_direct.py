@@ -228,3 +228,29 @@ def test_cvodes_coasting_equals_scipy_integration():
     a, b = coast(tr.model, P, t), integrate(tr.model, P, t, rtol=1e-12)
     np.testing.assert_allclose(a.x, b.x, rtol=1e-8, atol=1e-9)
     assert a.cost == pytest.approx(b.cost, rel=1e-9)
+
+
+def test_coasting_is_integrated_once_for_tasks_that_differ_only_in_alpha():
+    # u ≡ 0: α multiplies an exact zero, so the coasting solution of another α is the one already computed —
+    # and it is still the coasting solution of that α (checked against scipy's DOP853, as above)
+    from mobisense.ocp.simulate import coast
+
+    data = coupled_two_sensor()
+    t = np.linspace(0.0, 5.0, 41)
+    first = Problem.from_dict(data)
+    data["cost"]["alpha"] = 7.5 * first.cost.alpha
+    other = Problem.from_dict(data)
+    tr = transcription_for(first)
+    P1, P2 = (tr.layout.pack(tr.layout.values(p)) for p in (first, other))
+    assert not np.array_equal(P1, P2)
+    a, b = coast(tr.model, P1, t), coast(tr.model, P2, t)
+    assert b is a  # no second integration
+    reference = integrate(tr.model, P2, t, rtol=1e-12)
+    np.testing.assert_allclose(b.x, reference.x, rtol=1e-8, atol=1e-9)
+    assert b.cost == pytest.approx(reference.cost, rel=1e-9)
+    with pytest.raises(ValueError, match="read-only"):
+        b.x[0, 0] = 1.0  # shared between tasks: nobody may change it in place
+    p0 = data["sensors"][0]["p0"]
+    data["sensors"][0]["p0"] = [p0[0] + 1.0, p0[1]]  # anything else is another coasting problem
+    moved = Problem.from_dict(data)
+    assert coast(tr.model, tr.layout.pack(tr.layout.values(moved)), t) is not a
