@@ -90,10 +90,10 @@ def pair_chains(order: list[int], workers: int) -> list[tuple[list[int], int | N
 
     ``order`` is cut into one piece per worker (:func:`cut_chains`); the pieces are paired, and the pair
     ``(P, Q)`` becomes the chain ``P`` backwards — its first task ``P[-1]`` solved cold, the *head* — and the
-    chain ``Q``, whose first task neighbours the head in ``order`` and starts from the head's solution. The
-    cold head costs about 60 warm tasks on the default problem, so one head per pair instead of one per
-    chain is most of a warm sweep's parallel speed-up; ``Q``'s worker waits for it (≈ one head), then both
-    run. An odd worker out keeps a piece with its own cold head.
+    chain ``Q``, whose first task neighbours the head in ``order`` and starts from the head's solution. A
+    cold head costs 20–35 warm tasks on bench_sweep_overhead.py's sweep (0.37–0.6 s against 18 ms), so
+    paying it once per pair instead of once per chain shortens the parallel run; ``Q``'s worker waits for it
+    (≈ one head), then both run. An odd worker out keeps a piece with its own cold head.
 
     Returns
     -------
