@@ -128,13 +128,21 @@ def chain_links(chain: list[int], longest: int = LINK_TASKS) -> list[list[int]]:
     return links
 
 
-def solve_chain_link(payloads: list[dict[str, Any]], previous: list[dict[str, Any]] | None = None) -> list[dict]:
+def solve_chain_link(
+    payloads: list[dict[str, Any]],
+    previous: list[dict[str, Any]] | None = None,
+    shares: list[list[dict[str, Any]]] | None = None,
+) -> list[dict]:
     """Worker side: solve a link of consecutive chain tasks, each warm-started from the one before.
 
-    ``previous`` is the preceding link's result (its last task's ``carry`` starts this link). Returns one
-    :func:`solve_in_chain` result per payload; only the last keeps ``carry`` (the next link's start).
+    ``previous`` is the preceding link's result (its last task's ``carry`` starts this link). ``shares`` are
+    the first task's starts solved on several workers (:func:`mobisense.ocp.batch.worker.solve_start_share`),
+    adopted by its strategy. Returns one :func:`solve_in_chain` result per payload; only the last keeps
+    ``carry`` (the next link's start).
     """
     before = previous[-1] if previous else None
+    if shares:
+        payloads = [{**payloads[0], "solved_elsewhere": [r for share in shares for r in share]}, *payloads[1:]]
     results = []
     for payload in payloads:
         before = solve_in_chain(payload, before)

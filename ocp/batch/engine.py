@@ -22,7 +22,7 @@ from ...core.errors import ConfigError
 from ...core.interrupts import deferred_interrupts
 from .chains import chain_links, pair_chains, snake_order, solve_chain_link
 from .cluster import CONNECT_TIMEOUT
-from .worker import solve_task
+from .worker import solve_start_share, solve_task
 
 __all__ = ["open_client", "run_tasks", "CHAIN_AHEAD"]
 
@@ -135,9 +135,10 @@ def run_tasks(
     ``result`` is the worker's dict, or ``{"row": {"status": "error", "error": …}}`` if the task failed.
     With ``warm_start`` the tasks run in chains (:mod:`mobisense.ocp.batch.chains`): ordered along the
     ``coordinates`` (grouped by ``structure_keys``), cut into one chain per worker, two chains running
-    outwards from each cold head (:func:`mobisense.ocp.batch.chains.pair_chains`), each task started on its
-    worker from its predecessor's converged point; without, every task starts cold, at most ``in_flight``
-    (default 2 × workers) at a time. Ctrl-C and SIGTERM are held while dask is waited on and raised
+    outwards from each cold head (:func:`mobisense.ocp.batch.chains.pair_chains`; the head's certain starts
+    are solved on both chains' workers at once, :func:`mobisense.ocp.batch.worker.solve_start_share`), each
+    task started on its worker from its predecessor's converged point; without, every task starts cold, at most
+    ``in_flight`` (default 2 × workers) at a time. Ctrl-C and SIGTERM are held while dask is waited on and raised
     (``KeyboardInterrupt``) between two results, never inside dask's own code.
     """
     n = len(payloads)
@@ -160,6 +161,11 @@ def run_tasks(
     last: dict[int, Any] = {}  # queue -> its latest future (a chain's next link depends on it)
     heads: dict[int, Any] = {}  # queue -> its first future (the head the other chain of a pair starts from)
     pending = [0] * len(queues)
+    # chain -> the chain seeded by its head, on another worker (which would wait for the head: it helps solve it)
+    partner = {seed: q for q, seed in enumerate(seeded_by) if seed is not None and workers[0] is not None}
+
+    def pin(q: int) -> dict[str, Any]:
+        return {"workers": [workers[q % len(workers)]], "allow_other_workers": True} if workers[0] else {}
 
     def submit_next(q: int) -> bool:
         tasks = next(queues[q], None)
@@ -167,10 +173,15 @@ def run_tasks(
             return False
         key = f"task-{tasks[0]}-{time.time_ns()}"
         if warm_start:
-            pin = {"workers": [workers[q % len(workers)]], "allow_other_workers": True} if workers[0] else {}
             link = [payloads[i] for i in tasks]
             before = last.get(q, heads.get(seeded_by[q]) if seeded_by[q] is not None else None)
-            future = client.submit(solve_chain_link, link, before, pure=False, key=key, **pin)
+            shares = None
+            if q not in heads and q in partner:  # a shared cold head: its certain starts on both workers at once
+                shares = [
+                    client.submit(solve_start_share, link[0], k, 2, pure=False, key=f"starts-{k}-{key}", **pin(chain))
+                    for k, chain in enumerate((q, partner[q]))
+                ]
+            future = client.submit(solve_chain_link, link, before, shares, pure=False, key=key, **pin(q))
             heads.setdefault(q, future)
         else:
             future = client.submit(solve_task, payloads[tasks[0]], pure=False, key=key)

@@ -1,8 +1,10 @@
 """The worker side of a batch: solve one task given as plain data, return plain data.
 
-A task is ``{problem: dict, seed: NLP point or None, guess_seed: int or None}``; the worker builds (or
-reuses, per process) the transcription of the problem's structure and returns the result row, the
-solution as an ``xarray.Dataset`` and the converged NLP point (to warm-start neighbours).
+A task is ``{problem: dict, seed: NLP point or None, guess_seed: int or None, solved_elsewhere: list or
+None}``; the worker builds (or reuses, per process) the transcription of the problem's structure and returns
+the result row, the solution's arrays and the converged NLP point (to warm-start neighbours). A cold task's
+certain starts can be solved on several workers first (:func:`solve_start_share`) and handed to the task
+that decides (``solved_elsewhere``).
 """
 
 from __future__ import annotations
@@ -10,7 +12,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
-__all__ = ["solve_task", "worker_name", "dask_setup"]
+__all__ = ["solve_task", "solve_start_share", "worker_name", "dask_setup"]
 
 
 def solve_task(payload: dict[str, Any]) -> dict[str, Any]:
@@ -33,7 +35,9 @@ def solve_task(payload: dict[str, Any]) -> dict[str, Any]:
 
         solution = solve_shooting(problem)
     else:
-        solution = solve_direct(problem, init=payload.get("seed"), guess=guess)
+        solution = solve_direct(
+            problem, init=payload.get("seed"), guess=guess, solved_elsewhere=payload.get("solved_elsewhere")
+        )
     solution.reject_non_finite()
     cached = transcription_cache_hits() > hits
     row = {
@@ -42,7 +46,8 @@ def solve_task(payload: dict[str, Any]) -> dict[str, Any]:
         "terminal_cost": solution.terminal_cost,
         "running_cost": solution.running_cost,
         "iterations": int(sum(s.iterations for s in solution.homotopy)),
-        "time_s": time.perf_counter() - t0,
+        # worker-seconds spent on the task: here, and on the workers that solved some of its starts
+        "time_s": time.perf_counter() - t0 + sum(r.get("seconds", 0.0) for r in payload.get("solved_elsewhere") or ()),
         "solve_time_s": float(sum(s.time_s for s in solution.homotopy)),
         "worker": worker_name(),
         "error": "" if solution.success else solution.message,
@@ -51,6 +56,28 @@ def solve_task(payload: dict[str, Any]) -> dict[str, Any]:
     }
     # the solution.nc content as numpy arrays (no xarray on the worker; cheaper to pickle than a Dataset)
     return {"row": row, "dataset": solution.to_content(), "nlp": solution.nlp if solution.success else None}
+
+
+def solve_start_share(payload: dict[str, Any], share: int, shares: int) -> list[dict[str, Any]]:
+    """Worker side: solve share ``share`` of ``shares`` of a cold task's certain starts, as records.
+
+    The certain starts (:func:`mobisense.ocp.direct.strategy.certain_starts`: for strategy ``auto`` the cold
+    solve and the first random starts) are cut into ``shares`` (:func:`~mobisense.ocp.direct.strategy.share_starts`);
+    the records (:func:`mobisense.ocp.direct.solver.solve_starts`) go to the task that solves the problem
+    (``payload["solved_elsewhere"]``), which adopts them. Nothing to share (another strategy, a field
+    problem) or a problem that raises: an empty list, and the task solves everything itself.
+    """
+    from ..direct.solver import solve_starts
+    from ..direct.strategy import certain_starts, share_starts
+    from ..problem import Problem
+
+    try:
+        problem = Problem.from_dict(payload["problem"], source="task")
+        if problem.solver.method == "shooting" or payload.get("guess_seed") is not None:
+            return []
+        return solve_starts(problem, share_starts(certain_starts(problem), shares)[share])
+    except Exception:  # noqa: BLE001  (the deciding task solves the start itself and reports any error)
+        return []
 
 
 def worker_name() -> str:

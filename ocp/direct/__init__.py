@@ -6,6 +6,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
     __name__,
     {
         "solve_direct": "mobisense.ocp.direct.solver",
+        "solve_starts": "mobisense.ocp.direct.solver",
         "DirectCollocation": "mobisense.ocp.direct.transcription",
         "NLPResult": "mobisense.ocp.direct.transcription",
         "IPOPT_DEFAULTS": "mobisense.ocp.direct.transcription",

@@ -20,10 +20,10 @@ from ..simulate import Trajectory, coast
 from ..solution import HomotopyStep, Solution, SolveStatus, StartKind
 from .guesses import initial_guess, state_grid
 from .path_report import constraint_report
-from .strategy import Continuation, SolveContext, run_strategy
+from .strategy import Continuation, SolveContext, run_strategy, solve_labelled
 from .transcription import DirectCollocation, NLPResult, transcription_for
 
-__all__ = ["solve_direct"]
+__all__ = ["solve_direct", "solve_starts"]
 
 
 def _worst_violation(tr: DirectCollocation, result: NLPResult, problem: Problem) -> dict[str, Any]:
@@ -41,6 +41,7 @@ def solve_direct(
     transcription: DirectCollocation | None = None,
     init: Solution | dict[str, Any] | None = None,
     guess: np.ndarray | None = None,
+    solved_elsewhere: list[dict[str, Any]] | None = None,
 ) -> Solution:
     """Solve ``problem`` by direct collocation with the ε-homotopy of its solver options.
 
@@ -59,6 +60,9 @@ def solve_direct(
     guess : ndarray, shape (nw,), optional
         A scaled decision vector (see :meth:`DirectCollocation.pack`) to start a cold ε = 1 solve from,
         without continuation (multi-start).
+    solved_elsewhere : list of dict, optional
+        Starts of the strategy already solved for this same problem (:func:`solve_starts`, e.g. on other
+        workers at the same time): adopted instead of solved again; records of another problem are ignored.
 
     Returns
     -------
@@ -67,19 +71,10 @@ def solve_direct(
     """
     t_start = time.perf_counter()
     tr = transcription or transcription_for(problem)
-    t0, tf = problem.horizon.t0, problem.horizon.tf
-    values = tr.layout.values(problem)
-    t_grid, order = state_grid(tr, t0, tf)
-    coasting = coast(tr.model, tr.layout.pack(values), t_grid)
-    if not (np.isfinite(coasting.cost) and np.all(np.isfinite(coasting.x))):
-        raise RuntimeError(
-            f"the no-control (coasting) solution is not finite (J = {coasting.cost:g}): the covariance or the cost "
-            "overflows over the horizon; rescale the problem"
-        )
-    # the NLP objective is J / cost_scale = O(1): the scale follows the cost however small (M SPD makes it > 0);
-    # an absolute floor would make tiny-cost problems (M = 1e-40) optimise the control energy alone
-    values["cost_scale"] = max(abs(coasting.cost), 1e-300)
-    ctx = SolveContext(problem, tr, values, initial_guess(tr, coasting, tr.layout.pack(values)), progress)
+    ctx, coasting, order = _context(problem, tr, progress)
+    if solved_elsewhere:
+        digest = problem.digest()
+        ctx.solved_elsewhere = {r["label"]: r for r in solved_elsewhere if r.get("problem") == digest}
 
     stats: dict[str, Any] = {
         "build_time_s": tr.build_time_s,
@@ -117,6 +112,55 @@ def solve_direct(
         )
     stats["total_time_s"] = time.perf_counter() - t_start
     return _assemble(problem, kept, coasting, order, solved, message, stats)
+
+
+def solve_starts(problem: Problem, labels: list[str]) -> list[dict[str, Any]]:
+    """Solve the starts ``labels`` of ``problem``'s strategy (e.g. :func:`~.strategy.certain_starts`), as records.
+
+    A record (:meth:`Continuation.record`, plus the problem's digest) is plain data; handed to
+    :func:`solve_direct` (``solved_elsewhere``) in another process, it stands for that start there. So the
+    starts of one solve can run on several workers at once and the strategy still decides as if it had solved
+    them one by one (the records are the same bits: each start is deterministic given the problem).
+
+    Parameters
+    ----------
+    problem : Problem
+    labels : list of str
+        ``"cold"`` and/or ``"random start k"`` (k = 1 … ``solver.starts``).
+
+    Returns
+    -------
+    list of dict
+        One record per label, in order, with the wall time (s) it took (``seconds``).
+    """
+    tr = transcription_for(problem)
+    ctx, _, _ = _context(problem, tr, None)
+    records = []
+    for label in labels:
+        t0 = time.perf_counter()
+        record = solve_labelled(ctx, label).record()
+        records.append({**record, "seconds": time.perf_counter() - t0})
+    return records
+
+
+def _context(
+    problem: Problem, tr: DirectCollocation, progress: Callable[[HomotopyStep], None] | None
+) -> tuple[SolveContext, Trajectory, np.ndarray]:
+    """What every start of a solve shares (its coasting guess and cost scale), the coasting solution, the grid order."""
+    t0, tf = problem.horizon.t0, problem.horizon.tf
+    values = tr.layout.values(problem)
+    t_grid, order = state_grid(tr, t0, tf)
+    coasting = coast(tr.model, tr.layout.pack(values), t_grid)
+    if not (np.isfinite(coasting.cost) and np.all(np.isfinite(coasting.x))):
+        raise RuntimeError(
+            f"the no-control (coasting) solution is not finite (J = {coasting.cost:g}): the covariance or the cost "
+            "overflows over the horizon; rescale the problem"
+        )
+    # the NLP objective is J / cost_scale = O(1): the scale follows the cost however small (M SPD makes it > 0);
+    # an absolute floor would make tiny-cost problems (M = 1e-40) optimise the control energy alone
+    values["cost_scale"] = max(abs(coasting.cost), 1e-300)
+    ctx = SolveContext(problem, tr, values, initial_guess(tr, coasting, tr.layout.pack(values)), progress)
+    return ctx, coasting, order
 
 
 def _start_from_solution(init: Solution | dict[str, Any], run: Continuation) -> StartKind:

@@ -18,7 +18,9 @@ the best (benchmarks/bench_ocp_quality.py, benchmarks/RESULTS.md). ``solver.stra
     the cold solve alone.
 
 Every start is a :class:`Continuation`; its steps are reported through ``progress`` as they finish, each
-labelled with its start.
+labelled with its start. The starts ``auto`` solves whatever happens (:func:`certain_starts`) can be solved
+elsewhere — on other workers, at the same time — and handed in as records (:meth:`Continuation.record`): the
+strategy adopts a record instead of solving that start again, and decides exactly as if it had solved it.
 """
 
 from __future__ import annotations
@@ -38,6 +40,9 @@ from .transcription import DirectCollocation, NLPResult
 __all__ = [
     "Continuation",
     "SolveContext",
+    "certain_starts",
+    "share_starts",
+    "solve_labelled",
     "run_strategy",
     "auto_strategy",
     "thorough_strategy",
@@ -56,6 +61,8 @@ class SolveContext:
     w0: np.ndarray
     progress: Callable[[HomotopyStep], None] | None = None
     steps: list[HomotopyStep] = field(default_factory=list)
+    #: starts already solved elsewhere, by label (:meth:`Continuation.record`), adopted instead of solved
+    solved_elsewhere: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def parameters(self, eps: float) -> np.ndarray:
         """The NLP parameter vector at ``eps``."""
@@ -76,6 +83,15 @@ class SolveContext:
     ) -> Continuation:
         """A new start from ``w`` (default: the coasting guess), optionally primal–dual, within ``budget``."""
         return Continuation(self, label, self.w0 if w is None else w, lam_w, lam_g, budget=budget)
+
+    def solve_at_one(self, label: str, point: Callable[[], np.ndarray]) -> Continuation:
+        """The start ``label`` solved at ε = 1 from ``point()`` — or adopted, if it was solved elsewhere."""
+        record = self.solved_elsewhere.get(label)
+        if record is not None:
+            return Continuation.adopt(self, record)
+        run = self.start(label, point())
+        run.attempt(1.0)
+        return run
 
 
 @dataclass
@@ -135,6 +151,25 @@ class Continuation:
             self.failed = result
         return result.success
 
+    def record(self) -> dict[str, Any]:
+        """The start as plain data (numpy arrays, dataclasses), with its problem's digest (``problem``).
+
+        What :meth:`adopt` restores in another process.
+        """
+        state = {name: getattr(self, name) for name in _RECORDED}
+        return {**state, "steps": list(self.steps), "path": list(self.path), "problem": self.ctx.problem.digest()}
+
+    @classmethod
+    def adopt(cls, ctx: SolveContext, record: dict[str, Any]) -> Continuation:
+        """A start solved elsewhere (``record`` from :meth:`record`), its steps reported as if solved here."""
+        run = cls(ctx, **{name: record[name] for name in _RECORDED})
+        run.steps, run.path = list(record["steps"]), list(record["path"])
+        for step in run.steps:
+            ctx.steps.append(step)
+            if ctx.progress is not None:
+                ctx.progress(step)
+        return run
+
     def restart(self, w: np.ndarray, lam_w: np.ndarray | None = None, lam_g: np.ndarray | None = None) -> None:
         """Continue from another primal (and dual) point."""
         self.w, self.lam_w, self.lam_g = w, lam_w, lam_g
@@ -156,12 +191,29 @@ class Continuation:
         }
 
 
-def _cold(ctx: SolveContext) -> Continuation:
-    from .feasible_start import cold_start  # a start outside the keep-out zones (path_constraints.md §2.1)
+#: the state of a start that :meth:`Continuation.record` keeps (besides its steps and ε path)
+_RECORDED = ("label", "w", "lam_w", "lam_g", "budget", "result", "eps", "failed", "used", "exhausted")
 
-    run = ctx.start("cold", cold_start(ctx))
-    run.attempt(1.0)
-    return run
+
+def solve_labelled(ctx: SolveContext, label: str) -> Continuation:
+    """The start ``label`` solved at ε = 1, or adopted if solved elsewhere (:meth:`SolveContext.solve_at_one`).
+
+    ``"cold"`` starts from the coasting guess moved outside the keep-out zones (path_constraints.md §2.1);
+    ``"random start k"`` from :func:`~.guesses.random_guess` with seed k.
+    """
+    from .feasible_start import cold_start
+    from .guesses import random_guess
+
+    if label == "cold":
+        return ctx.solve_at_one(label, lambda: cold_start(ctx))
+    seed = label.removeprefix("random start ")
+    if seed == label or not seed.isdigit():
+        raise ValueError(f"unknown start {label!r}: expected 'cold' or 'random start k'")
+    return ctx.solve_at_one(label, lambda: random_guess(ctx.problem, int(seed), tr=ctx.tr))
+
+
+def _cold(ctx: SolveContext) -> Continuation:
+    return solve_labelled(ctx, "cold")
 
 
 def _homotopy(ctx: SolveContext, budget: int | None) -> Continuation:
@@ -172,12 +224,32 @@ def _homotopy(ctx: SolveContext, budget: int | None) -> Continuation:
 
 def _random_starts(ctx: SolveContext) -> Iterator[Continuation]:
     """The random starts 1 … ``solver.starts``, each solved when it is drawn."""
-    from .guesses import random_guess
-
     for seed in range(1, ctx.problem.solver.starts + 1):
-        run = ctx.start(f"random start {seed}", random_guess(ctx.problem, seed, tr=ctx.tr))
-        run.attempt(1.0)
-        yield run
+        yield solve_labelled(ctx, f"random start {seed}")
+
+
+def certain_starts(problem: Problem) -> list[str]:
+    """Labels of the starts ``problem``'s strategy solves whatever their results: the ones worth solving elsewhere.
+
+    ``auto``: the cold solve and the random starts 1 … ``consensus`` − 1 (fewer agreeing starts cannot stop
+    it; a start that fails or disagrees adds more, solved where the strategy runs). Other strategies: none.
+    """
+    options = problem.solver
+    if options.strategy != "auto":
+        return []
+    return ["cold"] + [f"random start {seed}" for seed in range(1, min(options.consensus - 1, options.starts) + 1)]
+
+
+def share_starts(labels: list[str], shares: int) -> list[list[str]]:
+    """``labels`` cut into ``shares`` contiguous shares, the first one no shorter (it holds the cold solve).
+
+    Random starts cost more Ipopt iterations than the cold solve (on bench_sweep_overhead.py's tasks: cold
+    32–156, random start 1 29–104, random start 2 55–255), so for the default three starts on two workers
+    ``[cold, random start 1]`` and ``[random start 2]`` balance best of the contiguous cuts.
+    """
+    shares = max(1, shares)
+    bounds = [-(-len(labels) * k // shares) for k in range(shares + 1)]
+    return [labels[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
 
 
 def _confirmed(runs: list[Continuation], count: int, rtol: float) -> bool:

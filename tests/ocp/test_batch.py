@@ -156,6 +156,30 @@ def test_killed_worker_does_not_lose_tasks():
     assert all(r["status"] == "solved" for r in results.values())
 
 
+def test_a_shared_cold_head_is_solved_on_both_workers_as_one_solve_would_be():
+    from dask.distributed import get_task_stream
+
+    payloads = []
+    for alpha in (0.002, 0.003, 0.004, 0.005):
+        data = small_base()
+        data["cost"]["alpha"] = alpha
+        payloads.append({"problem": data})
+    rows = {}
+    with open_client(None, 2) as client, get_task_stream(client) as stream:
+        coordinates = [np.array([float(i)]) for i in range(4)]
+        run_tasks(client, payloads, lambda i, r: rows.update({i: r["row"]}), coordinates=coordinates)
+    # the head's certain starts (cold + random start 1, random start 2) ran as two dask tasks on the two workers
+    shares = [t for t in stream.data if str(t["key"]).startswith("starts-")]
+    assert len(shares) == 2 and len({t["worker"] for t in shares}) == 2
+    head = next(i for i, r in rows.items() if r["start"] != "warm start from init")
+    single = solve_direct(Problem.from_dict(payloads[head]["problem"]))
+    # the same optimum as one process solving every start (Ipopt tol 1e-9; the workers may run compiled kernels)
+    assert rows[head]["cost"] == pytest.approx(single.cost, rel=1e-9)
+    # its three starts' iterations, summed over both workers (a kernel rounding apart may cost an iteration)
+    assert rows[head]["iterations"] == pytest.approx(sum(s.iterations for s in single.homotopy), abs=3)
+    assert sum(r["start"] == "warm start from init" for r in rows.values()) == 3
+
+
 def test_invalid_parameter_path_fails_before_running(tmp_path, capsys):
     (tmp_path / "base.yaml").write_text(yaml.safe_dump(small_base()))
     path = tmp_path / "sweep.yaml"

@@ -10,7 +10,8 @@ import pytest
 from reference_problems import hussein2008
 
 from mobisense.ocp.direct.kernel_cache import load_compiled
-from mobisense.ocp.direct.solver import solve_direct
+from mobisense.ocp.direct.solver import solve_direct, solve_starts
+from mobisense.ocp.direct.strategy import certain_starts, share_starts
 from mobisense.ocp.problem import Problem
 
 
@@ -38,6 +39,42 @@ def test_auto_draws_random_starts_until_consensus(consensus):
     assert len(labels) == 1 or agreeing(costs[:-1], rtol) < consensus
     # the kept solution is the lowest cost found, its J recomputed from the reported trajectory
     assert solution.cost == pytest.approx(min(c for c in costs if c is not None), rel=1e-9)
+
+
+def test_certain_starts_are_the_ones_auto_cannot_skip():
+    def labels(**options):
+        return certain_starts(Problem.from_dict(hussein2008(collocation={"intervals": 20}, **options)))
+
+    assert labels() == ["cold", "random start 1", "random start 2"]  # consensus 3: two random starts at least
+    assert labels(consensus=1) == ["cold"] and labels(consensus=5, starts=2) == labels(consensus=3)
+    assert labels(strategy="thorough") == [] and labels(strategy="cold") == []
+    assert share_starts(labels(), 2) == [["cold", "random start 1"], ["random start 2"]]
+    assert share_starts(["cold"], 2) == [["cold"], []] and share_starts(labels(), 1) == [labels()]
+    assert sum(share_starts(labels(consensus=6), 3), []) == labels(consensus=6)  # contiguous, in order
+
+
+@pytest.mark.slow
+def test_starts_solved_elsewhere_give_the_solve_that_solved_them_itself():
+    # the records of solve_starts, handed in, stand for those starts: same decision, same bits, same steps
+    problem = Problem.from_dict(hussein2008(collocation={"intervals": 20}))
+    alone = solve_direct(problem)
+    shares = share_starts(certain_starts(problem), 2)
+    records = solve_starts(problem, shares[1]) + solve_starts(problem, shares[0])  # in any order
+    steps = []
+    adopted = solve_direct(problem, progress=steps.append, solved_elsewhere=records)
+    assert adopted.cost == alone.cost and np.array_equal(adopted.u, alone.u)
+    assert adopted.stats["strategy"] == alone.stats["strategy"]
+    assert [(s.start, s.iterations, s.cost) for s in adopted.homotopy] == [
+        (s.start, s.iterations, s.cost) for s in alone.homotopy
+    ]
+    assert [s.start for s in steps] == [s.start for s in alone.homotopy]  # reported as if solved here
+    assert all(r["seconds"] > 0 for r in records)
+    # another problem's records are not adopted: its own starts are solved
+    data = hussein2008(collocation={"intervals": 20})
+    data["cost"]["alpha"] = 0.02
+    other = Problem.from_dict(data)
+    mixed = solve_direct(other, solved_elsewhere=records)
+    assert mixed.cost == solve_direct(other).cost != alone.cost
 
 
 @pytest.mark.slow
