@@ -52,10 +52,25 @@ def get_path(data: Any, path: str) -> Any:
 def set_path(data: dict[str, Any], path: str, value: Any) -> dict[str, Any]:
     """A deep copy of ``data`` with the value at ``path`` (which must exist) replaced by ``value``."""
     get_path(data, path)
-    out = copy.deepcopy(data)
+    out = _deep_copy(data)
     parts = parse_key_path(path)
     target: Any = out
     for part in parts[:-1]:
         target = target[part]
-    target[parts[-1]] = copy.deepcopy(value)
+    target[parts[-1]] = _deep_copy(value)
     return out
+
+
+def _deep_copy(value: Any) -> Any:
+    """``copy.deepcopy`` for YAML data: dicts and lists copied, immutable scalars shared, anything else deepcopied.
+
+    About 5x faster than ``copy.deepcopy`` on a problem (a sweep copies its base once per task and key). Unlike
+    it, a sub-tree that appears twice (a YAML alias) is copied twice rather than kept shared.
+    """
+    if isinstance(value, dict):
+        return {key: _deep_copy(item) for key, item in value.items()}
+    if isinstance(value, list):
+        return [_deep_copy(item) for item in value]
+    if value is None or isinstance(value, (str, int, float, bool)):
+        return value
+    return copy.deepcopy(value)

@@ -1,0 +1,60 @@
+"""The matrix checks of the configuration (core/config.py) and the copy behind a sweep's tasks (core/keypath.py)."""
+
+from __future__ import annotations
+
+import copy
+import warnings
+
+import numpy as np
+import pytest
+
+from mobisense.core.config import check_psd
+from mobisense.core.keypath import set_path
+
+
+def _allclose_symmetric(a: np.ndarray) -> bool:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # np.allclose warns for an infinite atol
+        return bool(np.allclose(a, a.T, rtol=1e-12, atol=1e-12 * max(1.0, float(np.abs(a).max()))))
+
+
+def _passes_symmetry(a: np.ndarray) -> bool:
+    try:
+        check_psd("M", a)
+    except ValueError as exc:
+        return "symmetric matrix, got" not in str(exc)  # failed later, on the eigenvalues: symmetric
+    return True
+
+
+def test_symmetry_check_is_np_allclose_spelt_out():
+    # the independent reference is np.allclose with the same tolerances, on matrices symmetric, off by
+    # 1e-13 … 1e-9 relative (either side of rtol = 1e-12), scaled over 10 decades, and with infinities and NaN
+    rng = np.random.default_rng(7)
+    cases = [
+        np.array([[np.inf, 1.0], [1.0, np.inf]]),
+        np.array([[np.nan, 1.0], [1.0, 1.0]]),
+        np.array([[1.0, np.inf], [1.0, 1.0]]),
+        np.array([[1.0, -np.inf], [np.inf, 1.0]]),
+        np.array([[1.0, 1e308], [1e308 * (1 + 1e-13), 1.0]]),
+    ]
+    for _ in range(500):
+        a = rng.normal(size=(3, 3)) * 10.0 ** rng.integers(-5, 6)
+        a = a + a.T
+        a[0, 1] *= 1 + rng.choice([0.0, 1e-13, 1e-11, 1e-9])
+        cases.append(a)
+    verdicts = [(_allclose_symmetric(a), _passes_symmetry(a)) for a in cases]
+    assert all(ref == ours for ref, ours in verdicts)
+    assert {ref for ref, _ in verdicts} == {True, False}  # both outcomes occur
+
+
+def test_set_path_copies_deeply_and_leaves_the_original():
+    data = {"a": {"b": [1, 2, {"c": 3.0}]}, "s": "text", "n": None}
+    before = copy.deepcopy(data)
+    value = {"list": [1, 2]}
+    out = set_path(data, "a.b[2]", value)
+    assert data == before and out == {"a": {"b": [1, 2, {"list": [1, 2]}]}, "s": "text", "n": None}
+    out["a"]["b"][0] = 99
+    out["a"]["b"][2]["list"].append(3)
+    assert data == before and value == {"list": [1, 2]}  # nothing shared with the input or the value
+    with pytest.raises(KeyError):
+        set_path(data, "a.x", 1)
