@@ -69,7 +69,7 @@ def serial(path: Path, folder: Path) -> dict[str, Any]:
     rows, datasets, previous, durations = [], [], None, []
     for i in snake_order([t.coordinates() for t in tasks], [t.structure for t in tasks]):
         t = time.perf_counter()
-        previous = solve_in_chain({"problem": tasks[i].problem}, previous)
+        previous = solve_in_chain(tasks[i].payload(), previous)
         durations.append(time.perf_counter() - t)
         rows.append({"task": tasks[i].task, "index": tasks[i].index, **previous["row"]})
         datasets.append(previous.get("dataset"))

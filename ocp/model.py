@@ -134,32 +134,34 @@ class ParameterLayout:
         blocks += path_parameter_blocks(s.path)
         self.blocks = blocks
         self.offsets: dict[str, tuple[int, tuple[int, ...]]] = {}
+        self._slices: list[tuple[str, int, int]] = []  # (name, start, stop) of each block
         offset = 0
         for name, shape in blocks:
             self.offsets[name] = (offset, shape)
-            offset += int(np.prod(shape))
+            size = int(np.prod(shape))
+            self._slices.append((name, offset, offset + size))
+            offset += size
         self.size = offset
 
     def pack(self, values: dict[str, Any]) -> np.ndarray:
         """Numeric parameter vector from a dict with one entry per block (row-major matrices)."""
         out = np.empty(self.size)
-        for name, (offset, shape) in self.offsets.items():
+        for name, start, stop in self._slices:
             arr = np.asarray(values[name], dtype=float).reshape(-1)
-            if arr.size != int(np.prod(shape)):
-                raise ValueError(f"parameter block {name}: expected {int(np.prod(shape))} values, got {arr.size}")
-            out[offset : offset + arr.size] = arr
+            if arr.size != stop - start:
+                raise ValueError(f"parameter block {name}: expected {stop - start} values, got {arr.size}")
+            out[start:stop] = arr
         return out
 
     def unpack(self, P: Any) -> dict[str, Any]:
         """Symbolic (or numeric) blocks of a parameter vector; matrices reshaped row-major."""
+        numeric = isinstance(P, np.ndarray)
         out: dict[str, Any] = {}
-        for name, (offset, shape) in self.offsets.items():
-            size = int(np.prod(shape))
-            block = P[offset : offset + size]
+        for name, start, stop in self._slices:
+            block = P[start:stop]
+            shape = self.offsets[name][1]
             if len(shape) == 2:
-                block = (
-                    ca.reshape(block, shape[1], shape[0]).T if not isinstance(P, np.ndarray) else block.reshape(shape)
-                )
+                block = block.reshape(shape) if numeric else ca.reshape(block, shape[1], shape[0]).T
             out[name] = block
         return out
 

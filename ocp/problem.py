@@ -66,6 +66,7 @@ __all__ = [
     "SolverOptions",
     "Problem",
     "load_problem",
+    "problem_digest",
 ]
 
 
@@ -407,8 +408,7 @@ class Problem(StrictModel):
 
     def digest(self) -> str:
         """The first 16 hex digits (64 bits) of the SHA-256 of the normalised problem with its solver options."""
-        text = json.dumps(self.normalised(), sort_keys=True, separators=(",", ":"))
-        return hashlib.sha256(text.encode()).hexdigest()[:16]
+        return problem_digest(self.normalised())
 
     def with_solver(self, **changes: Any) -> Problem:
         """A copy with solver options changed, e.g. ``with_solver(collocation={"intervals": 50})``."""
@@ -424,6 +424,12 @@ class Problem(StrictModel):
     def from_dict(cls, data: dict[str, Any], source: str = "<dict>") -> Problem:
         """Validate a dict (e.g. parsed YAML); raises :class:`mobisense.core.config.ConfigError`."""
         return parse_config(data, cls, source=source)
+
+
+def problem_digest(normalised: dict[str, Any]) -> str:
+    """:meth:`Problem.digest` of a problem given as its :meth:`Problem.normalised` dict."""
+    text = json.dumps(normalised, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def load_problem(path: str | Path) -> Problem:

@@ -20,7 +20,7 @@ import hashlib
 import itertools
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -32,7 +32,7 @@ from ...core.config import ConfigError, StrictModel, load_config
 from ...core.errors import brief
 from ...core.keypath import get_path, parse_key_path, set_path
 from ..model import Structure
-from ..problem import Problem, load_problem
+from ..problem import Problem, load_problem, problem_digest
 from ..sizes import direct_estimate, solution_bytes
 
 __all__ = [
@@ -87,10 +87,20 @@ class SweepTask:
     problem: dict[str, Any]
     structure: tuple[Any, str]
     coords: np.ndarray = field(default_factory=lambda: np.zeros(0), compare=False)
+    #: the validated problem (what ``problem`` holds), handed to the worker so that it is not validated twice
+    model: Problem | None = field(default=None, compare=False, repr=False)
 
     def coordinates(self) -> np.ndarray:
         """The varied values as numbers (for nearest-neighbour warm starts), shape (D,)."""
         return self.coords
+
+    def payload(self) -> dict[str, Any]:
+        """What a worker solves (:func:`mobisense.ocp.batch.worker.solve_task`): the validated problem.
+
+        A validated :class:`~mobisense.ocp.problem.Problem` unpickles in a quarter of the time its validation
+        takes (0.06 against 0.23 ms), which a warm-started task (≈ 10 ms) pays on the worker.
+        """
+        return {"problem": self.model if self.model is not None else self.problem}
 
 
 def load_sweep(path: str | Path) -> tuple[SweepSpec, Problem]:
@@ -166,9 +176,10 @@ def expand_sweep(spec: SweepSpec, base: Problem, source: str = "<sweep>") -> lis
             shown = ", ".join(f"{k}: {brief(v, 40)}" for k, v in values.items())
             raise ConfigError(f"{source}: vary (task {index}: {{{shown}}}): {detail}") from None
         structure = (Structure.of(problem), problem.solver.collocation.model_dump_json())
-        tasks.append(SweepTask(problem.digest(), index, values, problem.normalised(), structure))
+        normalised = problem.normalised()
+        tasks.append(SweepTask(problem_digest(normalised), index, values, normalised, structure, model=problem))
     coords = value_coordinates([t.values for t in tasks])
-    return [SweepTask(t.task, t.index, t.values, t.problem, t.structure, c) for t, c in zip(tasks, coords, strict=True)]
+    return [replace(t, coords=c) for t, c in zip(tasks, coords, strict=True)]
 
 
 def sweep_digest(tasks: list[SweepTask]) -> str:

@@ -165,7 +165,7 @@ def run_sweep(
                     if todo:
                         run_tasks(
                             client,
-                            [{"problem": t.problem} for t in todo],
+                            [t.payload() for t in todo],
                             on_result,
                             [t.structure for t in todo],
                             [t.coordinates() for t in todo],

@@ -1,10 +1,10 @@
 """The worker side of a batch: solve one task given as plain data, return plain data.
 
-A task is ``{problem: dict, seed: NLP point or None, guess_seed: int or None, solved_elsewhere: list or
-None}``; the worker builds (or reuses, per process) the transcription of the problem's structure and returns
-the result row, the solution's arrays and the converged NLP point (to warm-start neighbours). A cold task's
-certain starts can be solved on several workers first (:func:`solve_start_share`) and handed to the task
-that decides (``solved_elsewhere``).
+A task is ``{problem: dict or validated Problem, seed: NLP point or None, guess_seed: int or None,
+solved_elsewhere: list or None}``; the worker builds (or reuses, per process) the transcription of the
+problem's structure and returns the result row, the solution's arrays and the converged NLP point (to
+warm-start neighbours). A cold task's certain starts can be solved on several workers first
+(:func:`solve_start_share`) and handed to the task that decides (``solved_elsewhere``).
 """
 
 from __future__ import annotations
@@ -12,19 +12,18 @@ from __future__ import annotations
 import time
 from typing import Any
 
-__all__ = ["solve_task", "solve_start_share", "worker_name", "dask_setup"]
+__all__ = ["solve_task", "solve_start_share", "task_problem", "worker_name", "dask_setup"]
 
 
 def solve_task(payload: dict[str, Any]) -> dict[str, Any]:
     """Worker side: solve one task. ``payload`` = {problem, seed (NLP point or None), guess_seed (int|None)}."""
     from ..direct.solver import solve_direct
     from ..direct.transcription import transcription_cache_hits
-    from ..problem import Problem
     from ..solution import StartKind
 
     t0 = time.perf_counter()
     hits = transcription_cache_hits()
-    problem = Problem.from_dict(payload["problem"], source="task")
+    problem = task_problem(payload)
     guess = None
     if payload.get("guess_seed") is not None:
         from ..direct.guesses import random_guess
@@ -69,15 +68,22 @@ def solve_start_share(payload: dict[str, Any], share: int, shares: int) -> list[
     """
     from ..direct.solver import solve_starts
     from ..direct.strategy import certain_starts, share_starts
-    from ..problem import Problem
 
     try:
-        problem = Problem.from_dict(payload["problem"], source="task")
+        problem = task_problem(payload)
         if problem.solver.method == "shooting" or payload.get("guess_seed") is not None:
             return []
         return solve_starts(problem, share_starts(certain_starts(problem), shares)[share])
     except Exception:  # noqa: BLE001  (the deciding task solves the start itself and reports any error)
         return []
+
+
+def task_problem(payload: dict[str, Any]) -> Any:
+    """The task's :class:`~mobisense.ocp.problem.Problem`: as sent (validated by the client), or validated here."""
+    from ..problem import Problem
+
+    problem = payload["problem"]
+    return problem if isinstance(problem, Problem) else Problem.from_dict(problem, source="task")
 
 
 def worker_name() -> str:

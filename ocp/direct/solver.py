@@ -159,7 +159,8 @@ def _context(
     # the NLP objective is J / cost_scale = O(1): the scale follows the cost however small (M SPD makes it > 0);
     # an absolute floor would make tiny-cost problems (M = 1e-40) optimise the control energy alone
     values["cost_scale"] = max(abs(coasting.cost), 1e-300)
-    ctx = SolveContext(problem, tr, values, initial_guess(tr, coasting, tr.layout.pack(values)), progress)
+    P = tr.layout.pack(values)
+    ctx = SolveContext(problem, tr, values, lambda: initial_guess(tr, coasting, P), progress)
     return ctx, coasting, order
 
 
@@ -192,9 +193,10 @@ def _assemble(
         return np.concatenate([parts["xs"], parts["xc"].reshape(-1, tr.structure.nx)])[order]
 
     accepted = tr.unpack(run.w, P)
+    states = on_grid(accepted)
 
     _, nodes = tr.times(problem.horizon.t0, problem.horizon.tf)
-    costs = tuple(float(v) for v in tr.cost_terms(run.w, run.parameters(1.0)))
+    costs = tr.cost_values(run.w, run.parameters(1.0))
     lam = None if run.result is None else tr.costates(run.result, P)
     solution = Solution.from_states(
         problem,
@@ -203,14 +205,17 @@ def _assemble(
         message,
         run.eps,
         t=coasting.t,
-        x=on_grid(accepted),
+        x=states,
         t_u=nodes.ravel(),
         u=accepted["u"].reshape(nodes.size, -1),
         costs=costs,  # type: ignore[arg-type]
         t_costate=np.concatenate([[problem.horizon.t0], nodes.ravel()]),
         lam=lam,
         path_eps=np.array([e for e, _ in run.path]) if run.path else None,
-        path_x=np.stack([on_grid(tr.unpack(w, P)) for _, w in run.path]) if run.path else None,
+        # the last accepted step is the accepted point, unpacked above (with the same P)
+        path_x=np.stack([states if w is run.w else on_grid(tr.unpack(w, P)) for _, w in run.path])
+        if run.path
+        else None,
         homotopy=run.ctx.steps,
         baseline={
             "cost": coasting.cost,

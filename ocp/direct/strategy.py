@@ -53,24 +53,42 @@ __all__ = [
 
 @dataclass
 class SolveContext:
-    """What every start of one solve shares: the problem, its NLP, the coasting guess, the step record."""
+    """What every start of one solve shares: the problem, its NLP, the coasting guess, the step record.
+
+    ``guess`` makes the coasting guess (:attr:`w0`) when a start first needs it: a warm-started solve never
+    does. ``values`` are the parameter blocks (:meth:`mobisense.ocp.model.ParameterLayout.values`), not
+    changed once the context exists.
+    """
 
     problem: Problem
     tr: DirectCollocation
     values: dict[str, Any]
-    w0: np.ndarray
+    guess: Callable[[], np.ndarray]
     progress: Callable[[HomotopyStep], None] | None = None
     steps: list[HomotopyStep] = field(default_factory=list)
     #: starts already solved elsewhere, by label (:meth:`Continuation.record`), adopted instead of solved
     solved_elsewhere: dict[str, dict[str, Any]] = field(default_factory=dict)
+    _parameters: dict[float, np.ndarray] = field(default_factory=dict, repr=False)
+    _w0: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def w0(self) -> np.ndarray:
+        """The coasting guess (scaled decision vector, shape (nw,)), made on first use."""
+        if self._w0 is None:
+            self._w0 = self.guess()
+        return self._w0
 
     def parameters(self, eps: float) -> np.ndarray:
-        """The NLP parameter vector at ``eps``."""
-        return self.tr.layout.pack({**self.values, "eps": eps})
+        """The NLP parameter vector at ``eps`` (read-only; packed once per ε)."""
+        P = self._parameters.get(eps)
+        if P is None:
+            P = self._parameters[eps] = self.tr.layout.pack({**self.values, "eps": eps})
+            P.setflags(write=False)
+        return P
 
     def cost(self, w: np.ndarray) -> float:
         """J at ε = 1 of a decision vector."""
-        phi, running, _ = (float(v) for v in self.tr.cost_terms(w, self.parameters(1.0)))
+        phi, running, _ = self.tr.cost_values(w, self.parameters(1.0))
         return phi + running
 
     def start(
@@ -136,7 +154,7 @@ class Continuation:
         self.used += result.iterations
         if left is not None and result.status == "User_Requested_Stop":
             self.exhausted = True
-        phi, running, _ = (float(v) for v in self.tr.cost_terms(result.w, P))
+        phi, running, _ = self.tr.cost_values(result.w, P)
         step = HomotopyStep(
             eps, phi + running / eps, result.iterations, result.status, result.time_s, result.success, self.label
         )

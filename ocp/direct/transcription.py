@@ -31,6 +31,7 @@ from .assembly import assemble, index_maps, with_step
 from .iteration_limit import IterationLimit
 from .kernel_cache import load_compiled, source_digest
 from .kernels import IntervalKernels, condensing_matrices
+from .numeric_calls import BufferedFunction, ParameterMemo
 
 __all__ = [
     "DirectCollocation",
@@ -146,11 +147,17 @@ class DirectCollocation:
         self.nw = self.maps.nw
         nlp = assemble(k, self.functions, self.maps, K)
         self._nlp, self._derivatives, self.cost_terms, self.ng = nlp.nlp, nlp.derivatives, nlp.cost_terms, nlp.ng
-        self._nodes = k.k_nodes.map(K, "serial")
-        self._pv_gradient = k.k_pv.map(K, "serial")
-        self._solvers: dict[tuple[bool, bool], Any] = {}
+        # numeric evaluations on numpy arrays, without CasADi's per-number conversions (buffered.py)
+        self._costs = BufferedFunction(self.cost_terms)
+        self._nodes = BufferedFunction(k.k_nodes.map(K, "serial"))
+        self._pv_gradient = BufferedFunction(k.k_pv.map(K, "serial"))
+        self._scale_vectors = BufferedFunction(self.model.scales)
+        self._path_scale = BufferedFunction(self.model.path_scale)
+        self._x0_scaled = BufferedFunction(k.x0_scaled)
+        self._solvers: dict[tuple[bool, bool], BufferedFunction] = {}
         self._limit: IterationLimit | None = None
         self._bounds = self._make_bounds()
+        self._memo = ParameterMemo()  # scales, x̃_0 and the kernels' parameter input, per parameter vector
         self.build_time_s = time.perf_counter() - t_build
 
     def _kernel_functions(self, codegen: str) -> tuple[dict[str, ca.Function], str]:
@@ -188,21 +195,13 @@ class DirectCollocation:
                 if self._limit is None:
                     self._limit = IterationLimit(self.nw, self.ng, self.layout.size)
                 extra["iteration_callback"] = self._limit
-            self._solvers[(warm, limited)] = ca.nlpsol(
-                "direct_collocation",
-                "ipopt",
-                self._nlp,
-                {
-                    **self._derivatives,
-                    **extra,
-                    "ipopt": options,
-                    "print_time": False,
-                    "error_on_fail": False,
-                    "calc_lam_p": False,
-                    "no_nlp_grad": True,
-                },
-            )
+            self._solvers[(warm, limited)] = self._nlpsol(options, extra)
         return self._solvers[(warm, limited)]
+
+    def _nlpsol(self, options: dict[str, Any], extra: dict[str, Any]) -> BufferedFunction:
+        settings = {"ipopt": options, "print_time": False, "error_on_fail": False, "calc_lam_p": False}
+        settings.update(self._derivatives, no_nlp_grad=True, **extra)
+        return BufferedFunction(ca.nlpsol("direct_collocation", "ipopt", self._nlp, settings))
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(lbw, ubw, lbg, ubg): diagonal covariance entries ≥ 0, equalities, control bounds ≤ 0 (read-only)."""
@@ -252,20 +251,27 @@ class DirectCollocation:
         # One that arrived while the NLP was being built inside CasADi was recorded: it stops the solve here
         raise_if_interrupted()
         with deferred_interrupts():
-            sol = solver(**args)
+            sol, stats = solver.call(args)
         elapsed = time.perf_counter() - t0
-        stats = solver.stats()
         return NLPResult(
-            w=np.asarray(sol["x"]).ravel(),
-            lam_w=np.asarray(sol["lam_x"]).ravel(),
-            lam_g=np.asarray(sol["lam_g"]).ravel(),
-            objective=float(sol["f"]),
+            w=sol["x"].ravel(),
+            lam_w=sol["lam_x"].ravel(),
+            lam_g=sol["lam_g"].ravel(),
+            objective=float(sol["f"].item()),
             status=str(stats["return_status"]),
             success=bool(stats["success"]),
             iterations=int(stats["iter_count"]),
             time_s=elapsed,
-            g=np.asarray(sol["g"]).ravel(),
+            g=sol["g"].ravel(),
         )
+
+    def cost_values(self, w: np.ndarray, P: np.ndarray) -> tuple[float, float, float]:
+        """The cost terms of the decision vector ``w`` at parameters ``P``, as numbers.
+
+        ``(Tr[M Σ(tf)], ∫ (α/2|u|² + Tr KΣ) dt, ∫ |u|² dt)``: what :attr:`cost_terms` gives, without ``DM``.
+        """
+        phi, running, energy = self._costs(w, P)
+        return float(phi.item()), float(running.item()), float(energy.item())
 
     # ------------------------------------------------------------------ scaling and warm-start transfer
     @property
@@ -274,10 +280,15 @@ class DirectCollocation:
         return (self.structure, self.colloc.scheme, self.colloc.degree, self.intervals, self.kernels.layout)
 
     def _scales(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return tuple(np.asarray(v).ravel() for v in self.model.scales(P))  # type: ignore[return-value]
+        return self._memo.get(  # type: ignore[no-any-return]
+            "scales", P, lambda P: tuple(v.ravel() for v in self._scale_vectors(P))
+        )
 
     def variable_scales(self, P: np.ndarray) -> np.ndarray:
-        """Physical size of one unit of each decision variable, shape (nw,)."""
+        """Physical size of one unit of each decision variable, shape (nw,) (read-only)."""
+        return self._memo.get("variable_scales", P, self._variable_scales)  # type: ignore[no-any-return]
+
+    def _variable_scales(self, P: np.ndarray) -> np.ndarray:
         x_scale, u_scale = self._scales(P)
         k, d = self.kernels, self.colloc.degree
         out = np.empty(self.nw)
@@ -286,8 +297,11 @@ class DirectCollocation:
         return out
 
     def constraint_scales(self, P: np.ndarray) -> np.ndarray:
-        """Physical size of one unit of each constraint residual, shape (ng,)."""
-        b = self.layout.unpack(np.asarray(P, float))
+        """Physical size of one unit of each constraint residual, shape (ng,) (read-only)."""
+        return self._memo.get("constraint_scales", P, self._constraint_scales)  # type: ignore[no-any-return]
+
+    def _constraint_scales(self, P: np.ndarray) -> np.ndarray:
+        b = self.layout.unpack(P)
         x_scale, _ = self._scales(P)
         k, d = self.kernels, self.colloc.degree
         interval = np.concatenate(
@@ -295,7 +309,7 @@ class DirectCollocation:
                 x_scale[-k.nn :],
                 np.tile(x_scale[: k.ns], d),
                 np.full(k.n_bound, float(b["control_scale"][0]) ** 2),
-                np.tile(np.asarray(self.model.path_scale(P)).ravel(), d),
+                np.tile(self._path_scale(P).ravel(), d),
             ]
         )
         terminal = [
@@ -332,19 +346,22 @@ class DirectCollocation:
 
     def _extended(self, w: np.ndarray, P: np.ndarray) -> np.ndarray:
         """``[w; x̃_0]``: local positions ≥ nw refer to the scaled initial state (a parameter)."""
-        return np.concatenate([np.asarray(w, float), np.asarray(self.kernels.x0_scaled(P)).ravel()])
+        x0 = self._memo.get("x0_scaled", P, lambda P: self._x0_scaled(P).ravel())
+        return np.concatenate([np.asarray(w, float), x0])
 
     def _local(self, w: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The local vectors (na, K) and the kernels' parameter input (n_parameters + 1, K)."""
-        P = np.asarray(P, float)
-        Ph = np.repeat(with_step(P, self.kernels, self.intervals)[:, None], self.intervals, axis=1)
+        K = self.intervals
+        Ph = self._memo.get(
+            "Ph", P, lambda P: np.repeat(with_step(P, self.kernels, K)[:, None], K, axis=1)
+        )
         return self._extended(w, P)[self.maps.local].T, Ph
 
     def unpack(self, w: np.ndarray, P: np.ndarray) -> dict[str, np.ndarray]:
         """Unscaled states at starts ``xs`` (K+1, nx) and nodes ``xc`` (K, d, nx); controls ``u`` (K, d, nu)."""
         x_scale, _ = self._scales(P)
         s, d, K = self.structure, self.colloc.degree, self.intervals
-        xc, u = (np.asarray(v) for v in self._nodes(*self._local(w, P)))
+        xc, u = self._nodes(*self._local(w, P))
         return {
             "xs": self._extended(w, P)[self.maps.boundary] * x_scale,
             "xc": xc.reshape(s.nx, K, d).transpose(1, 2, 0),
@@ -382,7 +399,7 @@ class DirectCollocation:
         nu_sigma = lam_path.reshape(K, d, ns)
         lam_path = np.hstack([lam_path, lam[:, k.nr - k.n_cons :]])
         a, Ph = self._local(result.w, P)
-        G = np.asarray(self._pv_gradient(a, Ph, lam_path.T)).reshape(ny, K, d).transpose(1, 2, 0)  # (K, d, ny)
+        G = self._pv_gradient(a, Ph, lam_path.T).reshape(ny, K, d).transpose(1, 2, 0)  # (K, d, ny)
         # eq. direct.12: D̂ ν − h ν F̃ = e μ_y − G per interval, F̃ nilpotent: ν = D̂⁻¹B + h D̂⁻² B F̃
         _, _, e = condensing_matrices(c)
         B = e[None, :, None] * mu[:, None, -ny:] - G

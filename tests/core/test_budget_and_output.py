@@ -43,7 +43,7 @@ def test_transcription_size_matches_the_built_nlp():
     tr = transcription_for(problem)
     size = transcription_size(Structure.of(problem), 3, 5, "radau")
     assert (size.variables, size.constraints) == (tr.nw, tr.ng)  # exact
-    solver = tr._solver(False)
+    solver = tr._solver(False).function
     jacobian = solver.get_function("nlp_jac_g").sparsity_out(1).nnz()
     hessian = solver.get_function("nlp_hess_l").sparsity_out(0).nnz()
     # structural upper estimates: CasADi's patterns are at most these, and not far below (measured +12 … +17 %
