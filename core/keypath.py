@@ -5,15 +5,21 @@ from __future__ import annotations
 import copy
 import difflib
 import re
+from functools import lru_cache
 from typing import Any
 
-__all__ = ["parse_key_path", "get_path", "set_path"]
+__all__ = ["parse_key_path", "get_path", "set_path", "with_values"]
 
 _TOKEN = re.compile(r"([^.\[\]]+)|\[(\d+)\]")
 
 
 def parse_key_path(path: str) -> list[str | int]:
     """Split ``"sensors[0].p0"`` into ``["sensors", 0, "p0"]``; raise ``ValueError`` if malformed."""
+    return list(_parsed(path))
+
+
+@lru_cache(maxsize=256)
+def _parsed(path: str) -> tuple[str | int, ...]:
     parts: list[str | int] = []
     position = 0
     for match in _TOKEN.finditer(path):
@@ -24,7 +30,7 @@ def parse_key_path(path: str) -> list[str | int]:
         position = match.end()
     if not parts or position != len(path) or path.startswith(".") or path.endswith("."):
         raise ValueError(f"malformed key path {path!r}")
-    return parts
+    return tuple(parts)
 
 
 def get_path(data: Any, path: str) -> Any:
@@ -58,6 +64,32 @@ def set_path(data: dict[str, Any], path: str, value: Any) -> dict[str, Any]:
     for part in parts[:-1]:
         target = target[part]
     target[parts[-1]] = _deep_copy(value)
+    return out
+
+
+def with_values(data: dict[str, Any], values: dict[str, Any]) -> dict[str, Any]:
+    """``data`` with the value at each path of ``values`` (paths that exist in ``data``) replaced, sharing the rest.
+
+    Only the dicts and lists on the way to a replaced value are copied; every other sub-tree — and each new
+    value itself — is the very object of ``data`` (or ``values``). So neither may be changed while the result
+    is in use: it is for reading (a sweep validates each task's problem from it), where :func:`set_path`'s
+    deep copy of the whole tree per task and key cost more than the validation.
+    """
+    for path in values:
+        get_path(data, path)
+    out = dict(data)
+    copied = {id(out)}  # the containers made here (two paths through one container copy it once)
+    for path, value in values.items():
+        parts = _parsed(path)
+        target: Any = out
+        for part in parts[:-1]:
+            child = target[part]
+            if id(child) not in copied:
+                child = list(child) if isinstance(child, list) else dict(child)
+                target[part] = child
+                copied.add(id(child))
+            target = child
+        target[parts[-1]] = value
     return out
 
 

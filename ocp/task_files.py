@@ -103,10 +103,15 @@ def stack_tasks(datasets: list[Any], indices: list[int], task_ids: list[str]) ->
         The stacked file's content (``.to_xarray()`` for a Dataset); built without importing xarray.
     """
     parts = [_parts(ds) for ds in datasets]
-    first, coord_names, _ = parts[0]
-    key = _key(first)
+    key = _key(parts[0][0])
     if any(_key(variables) != key for variables, _, _ in parts[1:]):
         raise ValueError("stack_tasks: the datasets differ in their variables or shapes")
+    return _stack(parts, indices, task_ids)
+
+
+def _stack(parts: list[Any], indices: list[int], task_ids: list[str]) -> DatasetContent:
+    """:func:`stack_tasks` of datasets given as their :func:`_parts`, known to have one shape key."""
+    first, coord_names, _ = parts[0]
     index_dims = {name for name, (dims, _, _) in first.items() if dims == (name,)}
     out = DatasetContent()
     index_attrs = {"long_name": "index of the task in the sweep", "units": "1"}
@@ -130,7 +135,7 @@ def stack_tasks(datasets: list[Any], indices: list[int], task_ids: list[str]) ->
     described = {"long_name": "global attributes of the task's solution.nc (JSON)"}
     out.add_variable("task_attrs", (TASK_DIM,), np.asarray(text, dtype=str), described)
     meta = {"coordinates": coordinates, "renamed": renamed}
-    out.attrs.update({"title": f"mobisense: solutions of {len(datasets)} sweep tasks", _META: json.dumps(meta)})
+    out.attrs.update({"title": f"mobisense: solutions of {len(parts)} sweep tasks", _META: json.dumps(meta)})
     return out
 
 
@@ -176,16 +181,16 @@ def write_task_files(folder: Path, rows: list[dict[str, Any]], datasets: list[An
     from ..core.files import write_netcdf
 
     groups: dict[tuple[Any, ...], list[int]] = {}
-    for k, ds in enumerate(datasets):
-        if ds is not None:
-            groups.setdefault(shape_key(ds), []).append(k)
+    parts = {k: _parts(ds) for k, ds in enumerate(datasets) if ds is not None}
+    for k, (variables, _, _) in parts.items():
+        groups.setdefault(_key(variables), []).append(k)
     folder = Path(folder) / TASKS
     number = max((int(m.group(1)) for p in folder.glob("part-*.nc") if (m := _PART.match(p.name))), default=0)
     for members in groups.values():
         number += 1
         name = f"part-{number:06d}.nc"
-        stacked = stack_tasks([datasets[k] for k in members], [int(rows[k]["index"]) for k in members],
-                              [str(rows[k]["task"]) for k in members])  # fmt: skip
+        stacked = _stack([parts[k] for k in members], [int(rows[k]["index"]) for k in members],
+                         [str(rows[k]["task"]) for k in members])  # fmt: skip
         try:  # numbers and string indices: written without xarray
             write_netcdf(folder / name, stacked)
         except TypeError:  # strings stacked along task (task_id, task_attrs, a label that varies): through xarray

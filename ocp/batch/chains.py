@@ -26,6 +26,7 @@ __all__ = [
     "chain_links",
     "solve_in_chain",
     "solve_chain_link",
+    "best_seed",
 ]
 
 #: the most tasks one dask task of a chain solves (the first links are shorter: results come early)
@@ -132,15 +133,22 @@ def solve_chain_link(
     payloads: list[dict[str, Any]],
     previous: list[dict[str, Any]] | None = None,
     shares: list[list[dict[str, Any]]] | None = None,
+    seeds: list[dict[str, Any]] | None = None,
+    speculative: bool = False,
 ) -> list[dict]:
     """Worker side: solve a link of consecutive chain tasks, each warm-started from the one before.
 
     ``previous`` is the preceding link's result (its last task's ``carry`` starts this link). ``shares`` are
     the first task's starts solved on several workers (:func:`mobisense.ocp.batch.worker.solve_start_share`),
-    adopted by its strategy. Returns one :func:`solve_in_chain` result per payload; only the last keeps
-    ``carry`` (the next link's start).
+    adopted by its strategy. ``seeds`` are such start records of a neighbouring task: the link starts from the
+    lowest-cost one that reached ε = 1 (:func:`best_seed`). A ``speculative`` link (one started before the
+    neighbour's strategy has decided, see :func:`mobisense.ocp.batch.engine.run_tasks`) with nothing to start
+    from solves nothing and returns ``[]`` rather than solving its first task cold. Otherwise one
+    :func:`solve_in_chain` result per payload; only the last keeps ``carry`` (the next link's start).
     """
-    before = previous[-1] if previous else None
+    before = best_seed(seeds) if seeds is not None else (previous[-1] if previous else None)
+    if speculative and (before is None or before.get("carry") is None):
+        return []
     if shares:
         payloads = [{**payloads[0], "solved_elsewhere": [r for share in shares for r in share]}, *payloads[1:]]
     results = []
@@ -150,6 +158,19 @@ def solve_chain_link(
     for result in results[:-1]:
         result.pop("carry", None)
     return results
+
+
+def best_seed(records: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The lowest-cost start record that reached ε = 1, as a chain predecessor; None if none did.
+
+    ``records`` come from :func:`mobisense.ocp.direct.solver.solve_starts`; the predecessor is
+    ``{"carry": its primal–dual point, "cost": its J}``.
+    """
+    solved = [r for r in records if r.get("carry") is not None and r.get("cost") is not None]
+    if not solved:
+        return None
+    best = min(solved, key=lambda r: r["cost"])
+    return {"carry": best["carry"], "cost": best["cost"]}
 
 
 def solve_in_chain(payload: dict[str, Any], previous: dict[str, Any] | None = None) -> dict[str, Any]:

@@ -20,14 +20,23 @@ import numpy as np
 
 from ...core.errors import ConfigError
 from ...core.interrupts import deferred_interrupts
-from .chains import chain_links, pair_chains, snake_order, solve_chain_link
+from .chains import best_seed, chain_links, pair_chains, snake_order, solve_chain_link
 from .cluster import CONNECT_TIMEOUT
-from .worker import solve_start_share, solve_task
+from .worker import solve_start_share, solve_task, task_problem
 
 __all__ = ["open_client", "run_tasks", "CHAIN_AHEAD"]
 
 #: links of one chain submitted ahead of their results (a link is up to LINK_TASKS tasks)
 CHAIN_AHEAD = 4
+#: dask settings of the local cluster: every task is pinned to its chain's worker, so there is nothing to steal
+#: or rebalance; the workers' statistical profiler (a thread sampling the solving thread every 10 ms) and the
+#: twice-a-second system monitors cost CPU that the two cores of a small machine share with the solves
+LOCAL_CONFIG: dict[str, Any] = {
+    "distributed.scheduler.work-stealing": False,
+    "distributed.scheduler.active-memory-manager.start": False,
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.system-monitor.interval": "5s",
+}
 
 
 @contextlib.contextmanager
@@ -65,7 +74,7 @@ def open_client(scheduler: str | None, workers: int | None, security: Any = None
     # dask sets MALLOC_TRIM_THRESHOLD_ in its workers, which also freezes glibc's mmap threshold: MUMPS' large
     # per-factorisation workspaces then go through mmap/munmap and page faults. Unset it for our workers.
     with (
-        dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}),
+        dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None, **LOCAL_CONFIG}),
         deferred_interrupts(raise_at_exit=False) as deferred,
     ):
         cluster = LocalCluster(
@@ -137,79 +146,188 @@ def run_tasks(
     ``coordinates`` (grouped by ``structure_keys``), cut into one chain per worker, two chains running
     outwards from each cold head (:func:`mobisense.ocp.batch.chains.pair_chains`; the head's certain starts
     are solved on both chains' workers at once, :func:`mobisense.ocp.batch.worker.solve_start_share`), each
-    task started on its worker from its predecessor's converged point; without, every task starts cold, at most
-    ``in_flight`` (default 2 × workers) at a time. Ctrl-C and SIGTERM are held while dask is waited on and raised
-    (``KeyboardInterrupt``) between two results, never inside dask's own code.
+    task started on its worker from its predecessor's converged point. The second chain of a pair does not wait
+    for the head's strategy to decide: it starts *speculatively* from the best start its own worker solved, and
+    its rows are held back until the head is decided — kept if the head's optimum agrees with that start's
+    (``solver.agreement``, the strategy's own test of two optima being one), else discarded and the chain solved
+    again from the head. Without ``warm_start`` every task starts cold, at most ``in_flight`` (default 2 ×
+    workers) at a time. Ctrl-C and SIGTERM are held while dask is waited on and raised (``KeyboardInterrupt``)
+    between two results, never inside dask's own code.
     """
-    n = len(payloads)
-    if n == 0:
+    if not payloads:
         return
-    keys = structure_keys or [None] * n
-    coords = coordinates or [np.zeros(1)] * n
-    workers = sorted(client.scheduler_info().get("workers", {})) or [None]
-    seeded_by: list[int | None] = [None]
-    if warm_start:  # each queue: one chain's links (lists of consecutive tasks), solved by one dask task each
-        plan = pair_chains(snake_order(coords, keys), len(workers))
-        queues = [iter(chain_links(chain)) for chain, _ in plan]
-        seeded_by = [seed for _, seed in plan]
-    else:
-        queues = [iter([i] for i in range(n))]
-    # a chain's next links wait on its worker (their payloads are small), so that the worker never waits for the
-    # client (busy writing a batch of results); cold tasks are queued two per worker
-    limit = CHAIN_AHEAD if warm_start else in_flight or 2 * len(workers)
-    futures: dict[Any, tuple[list[int], int]] = {}  # future -> (its tasks, queue)
-    last: dict[int, Any] = {}  # queue -> its latest future (a chain's next link depends on it)
-    heads: dict[int, Any] = {}  # queue -> its first future (the head the other chain of a pair starts from)
-    pending = [0] * len(queues)
-    # chain -> the chain seeded by its head, on another worker (which would wait for the head: it helps solve it)
-    partner = {seed: q for q, seed in enumerate(seeded_by) if seed is not None and workers[0] is not None}
+    run = _TaskRun(client, payloads, on_result, structure_keys, coordinates, warm_start, in_flight)
+    with deferred_interrupts(raise_at_exit=False) as deferred, _collector_paused_on_old_objects():
+        while run.futures:
+            for future in _wait_some(list(run.futures), deferred):
+                run.finished(future)
+                deferred.check()
+            deferred.check()
 
-    def pin(q: int) -> dict[str, Any]:
-        return {"workers": [workers[q % len(workers)]], "allow_other_workers": True} if workers[0] else {}
 
-    def submit_next(q: int) -> bool:
-        tasks = next(queues[q], None)
+@contextlib.contextmanager
+def _collector_paused_on_old_objects() -> Iterator[None]:
+    """Keep the objects that exist now out of Python's cyclic garbage collector until the block ends.
+
+    The client process holds dask's scheduler, whose event loop shares the interpreter: a full collection of
+    its ≈ 130 000 objects took 90–130 ms (measured), during which no worker is told that a task's inputs are
+    ready — about one such pause per 200-task sweep. :func:`gc.freeze` exempts the objects alive before the run
+    (imports, the expanded tasks) from collections; they are unfrozen afterwards, so the process is left as it
+    was (unless it had frozen objects itself, which are left alone).
+    """
+    import gc
+
+    if gc.get_freeze_count():
+        yield
+        return
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
+
+
+class _TaskRun:
+    """The futures of one :func:`run_tasks` call: what each queue (a chain, or the cold tasks) submits next."""
+
+    def __init__(
+        self,
+        client: Any,
+        payloads: list[dict[str, Any]],
+        on_result: Callable[[int, dict[str, Any]], None],
+        structure_keys: list[Any] | None,
+        coordinates: list[np.ndarray] | None,
+        warm_start: bool,
+        in_flight: int | None,
+    ) -> None:
+        n = len(payloads)
+        self.client, self.payloads, self.on_result, self.warm_start = client, payloads, on_result, warm_start
+        self.workers = sorted(client.scheduler_info().get("workers", {})) or [None]
+        if warm_start:  # each queue: one chain's links (lists of consecutive tasks), solved by one dask task each
+            keys = structure_keys or [None] * n
+            plan = pair_chains(snake_order(coordinates or [np.zeros(1)] * n, keys), len(self.workers))
+            self.chains = [chain for chain, _ in plan]
+            self.seeded_by = [seed for _, seed in plan]
+        else:
+            self.chains, self.seeded_by = [list(range(n))], [None]
+        self.queues = [iter(chain_links(c) if warm_start else [[i] for i in c]) for c in self.chains]
+        # a chain's next links wait on its worker (their payloads are small), so that the worker never waits for
+        # the client (busy writing a batch of results); cold tasks are queued two per worker
+        self.limit = CHAIN_AHEAD if warm_start else in_flight or 2 * len(self.workers)
+        self.futures: dict[Any, tuple[list[int], int, int]] = {}  # future -> (its tasks, queue, generation)
+        self.last: dict[int, Any] = {}  # queue -> its latest future (a chain's next link depends on it)
+        self.heads: dict[int, Any] = {}  # queue -> its first future (the head the other chain of a pair starts from)
+        self.pending = [0] * len(self.queues)
+        self.generation = [0] * len(self.queues)  # a chain solved again (speculation lost) ignores older futures
+        # chain -> the chain seeded by its head, on another worker (which helps solve the head's starts)
+        self.partner = {s: q for q, s in enumerate(self.seeded_by) if s is not None and self.workers[0] is not None}
+        self.speculating: dict[int, Any] = {}  # partner chain -> the share future it started from, until decided
+        self.held: dict[int, list[tuple[list[int], list[dict[str, Any]]]]] = {}  # its finished links meanwhile
+        for q in range(len(self.queues)):
+            self.fill(q)
+
+    def pin(self, q: int) -> dict[str, Any]:
+        """Where queue ``q``'s tasks run: on its chain's worker."""
+        if self.workers[0] is None:
+            return {}
+        return {"workers": [self.workers[q % len(self.workers)]], "allow_other_workers": True}
+
+    def fill(self, q: int) -> None:
+        """Submit queue ``q``'s next links until :attr:`limit` of them are waiting."""
+        while self.pending[q] < self.limit and self.submit_next(q):
+            pass
+
+    def submit_next(self, q: int) -> bool:
+        """Submit queue ``q``'s next link (or cold task); False when it has none left."""
+        tasks = next(self.queues[q], None)
         if tasks is None:
             return False
         key = f"task-{tasks[0]}-{time.time_ns()}"
-        if warm_start:
-            link = [payloads[i] for i in tasks]
-            before = last.get(q, heads.get(seeded_by[q]) if seeded_by[q] is not None else None)
-            shares = None
-            if q not in heads and q in partner:  # a shared cold head: its certain starts on both workers at once
-                shares = [
-                    client.submit(solve_start_share, link[0], k, 2, pure=False, key=f"starts-{k}-{key}", **pin(chain))
-                    for k, chain in enumerate((q, partner[q]))
-                ]
-            future = client.submit(solve_chain_link, link, before, shares, pure=False, key=key, **pin(q))
-            heads.setdefault(q, future)
+        if not self.warm_start:
+            future = self.client.submit(solve_task, self.payloads[tasks[0]], pure=False, key=key)
         else:
-            future = client.submit(solve_task, payloads[tasks[0]], pure=False, key=key)
-        futures[future] = (tasks, q)
-        last[q] = future
-        pending[q] += 1
+            link = [self.payloads[i] for i in tasks]
+            seed = self.seeded_by[q]
+            before = self.last.get(q, self.heads.get(seed) if seed is not None else None)
+            shares, seeds = None, None
+            if q not in self.heads and q in self.partner:  # a shared cold head: its certain starts on both workers
+                shares = [
+                    self.client.submit(solve_start_share, link[0], k, 2, pure=False, key=f"starts-{k}-{key}",
+                                       **self.pin(chain))  # fmt: skip
+                    for k, chain in enumerate((q, self.partner[q]))
+                ]
+                if _shares_starts(link[0]):  # the partner starts from its own share's best start
+                    self.speculating[self.partner[q]] = shares[1]
+            elif q not in self.heads and q in self.speculating:
+                before, seeds = None, self.speculating[q]
+            future = self.client.submit(solve_chain_link, link, before, shares, seeds, q in self.speculating,
+                                        pure=False, key=key, **self.pin(q))  # fmt: skip
+            self.heads.setdefault(q, future)
+        self.futures[future] = (tasks, q, self.generation[q])
+        self.last[q] = future
+        self.pending[q] += 1
         return True
 
-    for q in range(len(queues)):
-        for _ in range(limit):
-            submit_next(q)
-    with deferred_interrupts(raise_at_exit=False) as deferred:
-        while futures:
-            done = _wait_some(list(futures), deferred)
-            for future in done:
-                tasks, q = futures.pop(future)
-                pending[q] -= 1
-                try:
-                    results = future.result() if warm_start else [future.result()]
-                except Exception as exc:  # noqa: BLE001  (a task's failure is data, not a crash of the sweep)
-                    results = [{"row": {"status": "error", "error": f"{type(exc).__name__}: {exc}"}} for _ in tasks]
-                for i, result in zip(tasks, results, strict=True):  # a link's rows are all kept, then Ctrl-C
-                    result.pop("carry", None)
-                    on_result(i, result)
-                deferred.check()
-                while pending[q] < limit and submit_next(q):
-                    pass
-            deferred.check()
+    def finished(self, future: Any) -> None:
+        """Take a finished future's rows: hand them on (or hold them, or drop a discarded chain's), submit more."""
+        tasks, q, generation = self.futures.pop(future)
+        if generation != self.generation[q]:
+            return  # a link of a speculation that was lost: solved again from the head
+        self.pending[q] -= 1
+        try:
+            results = future.result() if self.warm_start else [future.result()]
+        except Exception as exc:  # noqa: BLE001  (a task's failure is data, not a crash of the sweep)
+            results = [{"row": {"status": "error", "error": f"{type(exc).__name__}: {exc}"}} for _ in tasks]
+        if q in self.speculating:
+            self.held.setdefault(q, []).append((tasks, results))
+        else:
+            self.hand_on(tasks, results)
+        if q in self.partner and future is self.heads[q] and self.partner[q] in self.speculating:
+            self.decide(self.partner[q], results[0] if results else None)
+        if not (q in self.speculating and not results):  # a speculation without a start waits for the head
+            self.fill(q)
+
+    def hand_on(self, tasks: list[int], results: list[dict[str, Any]]) -> None:
+        for i, result in zip(tasks, results, strict=True):  # a link's rows are all kept, then Ctrl-C
+            result.pop("carry", None)
+            self.on_result(i, result)
+
+    def decide(self, q: int, head: dict[str, Any] | None) -> None:
+        """The head of partner chain ``q`` is decided: keep ``q``'s speculative rows, or solve ``q`` again."""
+        share = self.speculating.pop(q)
+        seed = best_seed(share.result()) if share.done() and share.status == "finished" else None
+        row = (head or {}).get("row", {})
+        head_task = self.chains[self.seeded_by[q]][0]
+        agreement = task_problem(self.payloads[head_task]).solver.agreement
+        agrees = (
+            seed is not None
+            and row.get("status") == "solved"
+            and abs(seed["cost"] - row["cost"]) <= agreement * abs(row["cost"])
+        )
+        held = self.held.pop(q, [])
+        if agrees and all(results for _, results in held):
+            for tasks, results in held:
+                self.hand_on(tasks, results)
+            return
+        # lost: forget the chain's futures and solve it again from the head
+        stale = [f for f, (_, owner, _) in self.futures.items() if owner == q]
+        self.client.cancel(stale)
+        for f in stale:
+            del self.futures[f]
+        self.generation[q] += 1
+        self.pending[q] = 0
+        self.queues[q] = iter(chain_links(self.chains[q]))
+        self.last.pop(q, None)
+        self.heads.pop(q, None)
+        self.fill(q)
+
+
+def _shares_starts(payload: dict[str, Any]) -> bool:
+    """Whether a task's strategy has certain starts to share (:func:`~mobisense.ocp.direct.strategy.certain_starts`)."""
+    from ..direct.strategy import certain_starts
+
+    problem = task_problem(payload)
+    return problem.solver.method != "shooting" and payload.get("guess_seed") is None and bool(certain_starts(problem))
 
 
 def _wait_some(futures: list[Any], deferred: Any) -> list[Any]:

@@ -30,7 +30,7 @@ from pydantic import Field, field_validator
 from ...core.budget import PROCESS_BYTES, Estimate
 from ...core.config import ConfigError, StrictModel, load_config
 from ...core.errors import brief
-from ...core.keypath import get_path, parse_key_path, set_path
+from ...core.keypath import get_path, parse_key_path, with_values
 from ..model import Structure
 from ..problem import Problem, load_problem, problem_digest
 from ..sizes import direct_estimate, solution_bytes
@@ -164,11 +164,9 @@ def expand_sweep(spec: SweepSpec, base: Problem, source: str = "<sweep>") -> lis
     combos = zip(*columns, strict=True) if spec.mode == "zip" else itertools.product(*columns)
     tasks = []
     for index, combo in enumerate(combos):
-        problem_data = data
-        for key, value in zip(keys, combo, strict=True):
-            problem_data = set_path(problem_data, key, value)
-        problem_data["name"] = f"{base.name[:100]}_{index:04d}"
         values = dict(zip(keys, combo, strict=True))
+        # shares all but the varied values with ``data``: only validated, never changed
+        problem_data = with_values(data, {**values, "name": f"{base.name[:100]}_{index:04d}"})
         try:
             problem = Problem.from_dict(problem_data, source=source)
         except ConfigError as exc:

@@ -117,10 +117,12 @@ def solve_direct(
 def solve_starts(problem: Problem, labels: list[str]) -> list[dict[str, Any]]:
     """Solve the starts ``labels`` of ``problem``'s strategy (e.g. :func:`~.strategy.certain_starts`), as records.
 
-    A record (:meth:`Continuation.record`, plus the problem's digest) is plain data; handed to
+    A record (:meth:`Continuation.record`, with the problem's digest) is plain data; handed to
     :func:`solve_direct` (``solved_elsewhere``) in another process, it stands for that start there. So the
     starts of one solve can run on several workers at once and the strategy still decides as if it had solved
-    them one by one (the records are the same bits: each start is deterministic given the problem).
+    them one by one (the records are the same bits: each start is deterministic given the problem). A start
+    that reached ε = 1 also gives its cost ``J`` (``cost``) and its primal–dual point in the form of
+    :attr:`Solution.nlp` (``carry``), from which a neighbouring problem can be warm-started.
 
     Parameters
     ----------
@@ -131,15 +133,18 @@ def solve_starts(problem: Problem, labels: list[str]) -> list[dict[str, Any]]:
     Returns
     -------
     list of dict
-        One record per label, in order, with the wall time (s) it took (``seconds``).
+        One record per label, in order, with the wall time (s) it took (``seconds``), and ``cost`` and
+        ``carry`` (None when the start did not reach ε = 1).
     """
     tr = transcription_for(problem)
     ctx, _, _ = _context(problem, tr, None)
     records = []
     for label in labels:
         t0 = time.perf_counter()
-        record = solve_labelled(ctx, label).record()
-        records.append({**record, "seconds": time.perf_counter() - t0})
+        run = solve_labelled(ctx, label)
+        point = _nlp_point(tr, run.result, ctx.parameters(1.0)) if run.solved and run.result is not None else None
+        records.append({**run.record(), "seconds": time.perf_counter() - t0,
+                        "cost": None if point is None else ctx.cost(run.w), "carry": point})  # fmt: skip
     return records
 
 
@@ -229,11 +234,10 @@ def _assemble(
         u_nodes = solution.u.reshape(tr.intervals, tr.colloc.degree, problem.N, 2)
         solution.stats["constraints"] = constraint_report(problem, tr, run.result, P, u_nodes)
     if run.result is not None:
-        solution.nlp = {
-            "w": run.result.w,
-            "lam_w": run.result.lam_w,
-            "lam_g": run.result.lam_g,
-            "P": P,
-            "signature": repr(tr.signature),
-        }
+        solution.nlp = _nlp_point(tr, run.result, P)
     return solution
+
+
+def _nlp_point(tr: DirectCollocation, result: NLPResult, P: np.ndarray) -> dict[str, Any]:
+    """A converged primal–dual point as plain data (:attr:`Solution.nlp`): what warm-starts a neighbour."""
+    return {"w": result.w, "lam_w": result.lam_w, "lam_g": result.lam_g, "P": P, "signature": repr(tr.signature)}

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from mobisense.core.config import check_psd
-from mobisense.core.keypath import set_path
+from mobisense.core.keypath import set_path, with_values
 
 
 def _allclose_symmetric(a: np.ndarray) -> bool:
@@ -58,3 +58,23 @@ def test_set_path_copies_deeply_and_leaves_the_original():
     assert data == before and value == {"list": [1, 2]}  # nothing shared with the input or the value
     with pytest.raises(KeyError):
         set_path(data, "a.x", 1)
+
+
+def test_with_values_replaces_like_set_path_and_copies_only_the_way_there():
+    data = {"cost": {"alpha": 1.0, "M": [[1.0]]}, "sensors": [{"p0": [0, 0], "v0": [1, 1]}, {"p0": [5, 5]}],
+            "solver": {"tol": 1e-9}, "name": "base"}  # fmt: skip
+    before = copy.deepcopy(data)
+    changes = {"cost.alpha": 2.0, "sensors[0].p0": [3, 4], "sensors[0].v0": [0, 0], "name": "x"}
+    out = with_values(data, changes)
+    expected = copy.deepcopy(data)
+    for path, value in changes.items():
+        expected = set_path(expected, path, value)
+    assert out == expected and data == before  # the values of set_path, the original untouched
+    # containers on a replaced path are new (sensors[0] once for both of its paths), the rest is shared
+    assert out["sensors"] is not data["sensors"] and out["sensors"][0] is not data["sensors"][0]
+    assert out["sensors"][1] is data["sensors"][1] and out["solver"] is data["solver"]
+    assert out["cost"]["M"] is data["cost"]["M"]
+    with pytest.raises(KeyError, match="did you mean 'alpha'"):
+        with_values(data, {"cost.alpah": 1.0})
+    with pytest.raises(KeyError):
+        with_values(data, {"sensors[5].p0": 1.0})

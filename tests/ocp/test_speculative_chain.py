@@ -1,0 +1,141 @@
+"""The second chain of a pair starts from its own share of the head's starts, before the head is decided.
+
+run_tasks is driven here through an in-process stand-in for dask's client whose futures finish in the order a
+test chooses, so that both outcomes of the speculation happen for certain: the head's optimum agrees with
+the partner's start (its rows, held back until then, are kept) or it does not (they are dropped and the chain
+is solved again from the head; the disagreement is made by showing the client a seed of twice its cost). The
+solves are real (K = 20); on a real cluster, tests/ocp/test_batch.py.
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import numpy as np
+import pytest
+from reference_problems import hussein2008
+
+import mobisense.ocp.batch.engine as engine
+from mobisense.ocp.batch.engine import run_tasks
+from mobisense.ocp.direct.solver import solve_direct
+from mobisense.ocp.problem import Problem
+
+
+class _Future:
+    """A task that runs when it is first asked for its result (its inputs first)."""
+
+    def __init__(self, client: _Client, fn: Any, args: tuple, key: str) -> None:
+        self.client, self.fn, self.args, self.key = client, fn, args, key
+        self.value: Any = None
+        self.ran = False
+
+    def compute(self) -> Any:
+        if not self.ran:
+            args = [a.compute() if isinstance(a, _Future) else a for a in self.args]
+            args = [[x.compute() if isinstance(x, _Future) else x for x in a] if isinstance(a, list) else a
+                    for a in args]  # fmt: skip
+            self.value, self.ran = self.fn(*args), True
+            self.client.ran.append(self.key)
+        return self.value
+
+    def result(self) -> Any:
+        return copy.deepcopy(self.compute())  # the client's own copy, as dask's serialisation gives it
+
+    def done(self) -> bool:
+        return self.ran
+
+    @property
+    def status(self) -> str:
+        return "finished" if self.ran else "pending"
+
+
+class _Client:
+    workers = {"tcp://a": {}, "tcp://b": {}}
+
+    def __init__(self) -> None:
+        self.submitted: list[_Future] = []
+        self.ran: list[str] = []
+        self.cancelled: list[str] = []
+
+    def scheduler_info(self) -> dict[str, Any]:
+        return {"workers": self.workers}
+
+    def submit(self, fn: Any, *args: Any, key: str = "", **_: Any) -> _Future:
+        future = _Future(self, fn, args, key)
+        self.submitted.append(future)
+        return future
+
+    def cancel(self, futures: list[_Future]) -> None:
+        self.cancelled += [f.key for f in futures]
+
+
+def _payloads() -> list[dict[str, Any]]:
+    payloads = []
+    for alpha in (0.002, 0.0025, 0.003, 0.0035, 0.004, 0.0045):
+        data = hussein2008(collocation={"intervals": 20})
+        data["cost"]["alpha"] = alpha
+        payloads.append({"problem": Problem.from_dict(data)})
+    return payloads
+
+
+def _run(
+    payloads: list[dict[str, Any]], monkeypatch: pytest.MonkeyPatch, partner_links_first: int
+) -> tuple[_Client, list[tuple[int, dict]]]:
+    """run_tasks on 2 stand-in workers; ``partner_links_first`` links of the partner chain finish before the head.
+
+    With 6 tasks on a line, the head chain is tasks 2, 1, 0 (its head is task 2) and the partner chain 3, 4, 5.
+    """
+    client, rows, finished_partner = _Client(), [], []
+
+    def rank(future: _Future) -> tuple[int, str]:
+        task = int(future.key.split("-")[1])
+        if task >= 3 and len(finished_partner) < partner_links_first:
+            return 0, future.key
+        return (1 if task == 2 else 2 if task < 3 else 3), future.key
+
+    def wait_some(futures: list[_Future], deferred: Any) -> list[_Future]:
+        first = min(futures, key=rank)
+        first.compute()
+        if int(first.key.split("-")[1]) >= 3:
+            finished_partner.append(first.key)
+        return [first]
+
+    monkeypatch.setattr(engine, "_wait_some", wait_some)
+    coordinates = [np.array([float(i)]) for i in range(len(payloads))]
+    run_tasks(client, payloads, lambda i, r: rows.append((i, r["row"])), coordinates=coordinates)
+    return client, rows
+
+
+@pytest.mark.slow
+def test_a_partner_chain_that_agrees_with_the_head_keeps_its_rows(monkeypatch):
+    payloads = _payloads()
+    client, rows = _run(payloads, monkeypatch, partner_links_first=2)  # the whole partner chain before the head
+    assert sorted(i for i, _ in rows) == list(range(6))  # every task once
+    assert client.cancelled == [] and sum(k.startswith("task-3-") for k in client.ran) == 1  # nothing solved again
+    # the partner's rows were held back until the head was decided: the head's row comes first
+    assert rows[0][0] == 2 and rows[0][1]["start"] != "warm start from init"
+    assert [i for i, _ in rows[1:4]] == [3, 4, 5]
+    for i, row in rows:  # each the optimum of its own problem
+        assert row["status"] == "solved" and (row["start"] == "warm start from init") == (i != 2)
+        assert row["cost"] == pytest.approx(solve_direct(payloads[i]["problem"]).cost, rel=1e-8)
+
+
+@pytest.mark.slow
+def test_a_partner_chain_that_disagrees_with_the_head_is_solved_again_from_it(monkeypatch):
+    payloads = _payloads()
+    real = engine.best_seed
+
+    def far_seed(records: list[dict[str, Any]]) -> dict[str, Any] | None:
+        seed = real(records)  # the client's view of the partner's start: another optimum, twice as costly
+        return None if seed is None else {**seed, "cost": 2 * seed["cost"]}
+
+    monkeypatch.setattr(engine, "best_seed", far_seed)
+    client, rows = _run(payloads, monkeypatch, partner_links_first=1)
+    assert sorted(i for i, _ in rows) == list(range(6))  # every task once: the speculative rows were dropped
+    assert [k for k in client.cancelled if k.startswith("task-4-")]  # the speculative link still waiting
+    assert sum(k.startswith("task-3-") for k in client.ran) == 2  # solved speculatively, then again from the head
+    assert rows[0][0] == 2 and [i for i, _ in rows].index(3) > 0
+    for i, row in rows:
+        assert row["status"] == "solved"
+        assert row["cost"] == pytest.approx(solve_direct(payloads[i]["problem"]).cost, rel=1e-8)
