@@ -13,6 +13,9 @@ $(BIN)/python:
 $(STAMP): pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e ".[sweep,test,docs]"
 	$(BIN)/python -m ipykernel install --sys-prefix --name python3 >/dev/null
+	@# byte-compile the package as a regular (non-editable) install does: with PYTHONDONTWRITEBYTECODE set, every
+	@# command would otherwise compile its modules again (≈ 60 ms of `mobisense validate`'s 0.3 s)
+	$(BIN)/python -m compileall -q -j 0 __init__.py cli.py core ocp estimation formation >/dev/null
 	touch $(STAMP)
 
 demo: $(STAMP)  ## solve the default problem (problems/hussein2008.yaml) into out/hussein2008/
