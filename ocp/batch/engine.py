@@ -270,7 +270,10 @@ class _TaskRun:
 
     def finished(self, future: Any) -> None:
         """Take a finished future's rows: hand them on (or hold them, or drop a discarded chain's), submit more."""
-        tasks, q, generation = self.futures.pop(future)
+        entry = self.futures.pop(future, None)
+        if entry is None:  # finished in the same wait as the head whose decision dropped it
+            return
+        tasks, q, generation = entry
         if generation != self.generation[q]:
             return  # a link of a speculation that was lost: solved again from the head
         self.pending[q] -= 1

@@ -80,11 +80,12 @@ def _payloads() -> list[dict[str, Any]]:
 
 
 def _run(
-    payloads: list[dict[str, Any]], monkeypatch: pytest.MonkeyPatch, partner_links_first: int
+    payloads: list[dict[str, Any]], monkeypatch: pytest.MonkeyPatch, partner_links_first: int, together: bool = False
 ) -> tuple[_Client, list[tuple[int, dict]]]:
     """run_tasks on 2 stand-in workers; ``partner_links_first`` links of the partner chain finish before the head.
 
     With 6 tasks on a line, the head chain is tasks 2, 1, 0 (its head is task 2) and the partner chain 3, 4, 5.
+    ``together``: the head and the partner's next link are reported finished by the same wait, the head first.
     """
     client, rows, finished_partner = _Client(), [], []
 
@@ -99,6 +100,10 @@ def _run(
         first.compute()
         if int(first.key.split("-")[1]) >= 3:
             finished_partner.append(first.key)
+        partner = [f for f in futures if int(f.key.split("-")[1]) >= 3]
+        if together and first.key.startswith("task-2-") and partner:
+            partner[0].compute()
+            return [first, partner[0]]
         return [first]
 
     monkeypatch.setattr(engine, "_wait_some", wait_some)
@@ -139,3 +144,14 @@ def test_a_partner_chain_that_disagrees_with_the_head_is_solved_again_from_it(mo
     for i, row in rows:
         assert row["status"] == "solved"
         assert row["cost"] == pytest.approx(solve_direct(payloads[i]["problem"]).cost, rel=1e-8)
+
+
+@pytest.mark.slow
+def test_a_partner_link_finished_with_the_head_that_drops_it_is_ignored(monkeypatch):
+    payloads = _payloads()
+    real = engine.best_seed
+    monkeypatch.setattr(engine, "best_seed", lambda records: None if (seed := real(records)) is None
+                        else {**seed, "cost": 2 * seed["cost"]})  # fmt: skip
+    _, rows = _run(payloads, monkeypatch, partner_links_first=1, together=True)
+    assert sorted(i for i, _ in rows) == list(range(6))  # every task once, none from the dropped speculation
+    assert all(row["status"] == "solved" for _, row in rows)
