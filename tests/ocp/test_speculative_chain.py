@@ -155,3 +155,18 @@ def test_a_partner_link_finished_with_the_head_that_drops_it_is_ignored(monkeypa
     _, rows = _run(payloads, monkeypatch, partner_links_first=1, together=True)
     assert sorted(i for i, _ in rows) == list(range(6))  # every task once, none from the dropped speculation
     assert all(row["status"] == "solved" for _, row in rows)
+
+
+@pytest.mark.slow
+def test_a_speculation_without_a_start_waits_for_the_head(monkeypatch):
+    # the partner's share reached no usable start (all its starts failed): its links solve nothing, and the
+    # chain is solved from the head once that is decided — no task is solved cold by the partner
+    import mobisense.ocp.batch.chains as chains
+
+    payloads = _payloads()
+    monkeypatch.setattr(chains, "best_seed", lambda records: None)  # what the partner's worker sees
+    client, rows = _run(payloads, monkeypatch, partner_links_first=2)
+    assert sorted(i for i, _ in rows) == list(range(6))
+    assert all(row["status"] == "solved" for _, row in rows)
+    partner = [row for i, row in rows if i >= 3]
+    assert all(row["start"] == "warm start from init" for row in partner)  # from the head, not cold
