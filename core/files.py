@@ -66,15 +66,11 @@ _PLAIN = (str, int, bool, type(None))
 
 def to_jsonable(value: Any) -> Any:
     """Convert numpy scalars/arrays and enums (recursively) to plain Python for ``json``; NaN/inf become None."""
-    kind = type(value)  # the common exact types first (summaries are large trees of them)
+    kind = type(value)  # the leaves' exact types first (summaries are large trees of them)
     if kind in _PLAIN:
         return value
     if kind is float:
         return value if math.isfinite(value) else None
-    if kind is dict:
-        return {str(k): to_jsonable(v) for k, v in value.items()}
-    if kind is list:
-        return [to_jsonable(v) for v in value]
     if isinstance(value, Enum):
         return to_jsonable(value.value)
     if isinstance(value, dict):

@@ -22,7 +22,7 @@ from ...core.errors import ConfigError
 from ...core.interrupts import deferred_interrupts
 from .chains import best_seed, chain_links, pair_chains, snake_order, solve_chain_link
 from .cluster import CONNECT_TIMEOUT
-from .worker import solve_start_share, solve_task, task_problem
+from .worker import shareable_starts, solve_start_share, solve_task, task_problem
 
 __all__ = ["open_client", "run_tasks", "CHAIN_AHEAD"]
 
@@ -256,7 +256,7 @@ class _TaskRun:
                                        **self.pin(chain))  # fmt: skip
                     for k, chain in enumerate((q, self.partner[q]))
                 ]
-                if _shares_starts(link[0]):  # the partner starts from its own share's best start
+                if shareable_starts(link[0]):  # the partner starts from its own share's best start
                     self.speculating[self.partner[q]] = shares[1]
             elif q not in self.heads and q in self.speculating:
                 before, seeds = None, self.speculating[q]
@@ -323,14 +323,6 @@ class _TaskRun:
         self.last.pop(q, None)
         self.heads.pop(q, None)
         self.fill(q)
-
-
-def _shares_starts(payload: dict[str, Any]) -> bool:
-    """Whether a task's strategy has certain starts to share (:func:`~mobisense.ocp.direct.strategy.certain_starts`)."""
-    from ..direct.strategy import certain_starts
-
-    problem = task_problem(payload)
-    return problem.solver.method != "shooting" and payload.get("guess_seed") is None and bool(certain_starts(problem))
 
 
 def _wait_some(futures: list[Any], deferred: Any) -> list[Any]:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
-__all__ = ["solve_task", "solve_start_share", "task_problem", "worker_name", "dask_setup"]
+__all__ = ["solve_task", "solve_start_share", "shareable_starts", "task_problem", "worker_name", "dask_setup"]
 
 
 def solve_task(payload: dict[str, Any]) -> dict[str, Any]:
@@ -67,15 +67,28 @@ def solve_start_share(payload: dict[str, Any], share: int, shares: int) -> list[
     problem) or a problem that raises: an empty list, and the task solves everything itself.
     """
     from ..direct.solver import solve_starts
-    from ..direct.strategy import certain_starts, share_starts
+    from ..direct.strategy import share_starts
 
     try:
         problem = task_problem(payload)
-        if problem.solver.method == "shooting" or payload.get("guess_seed") is not None:
-            return []
-        return solve_starts(problem, share_starts(certain_starts(problem), shares)[share])
+        labels = shareable_starts(payload, problem)
+        return solve_starts(problem, share_starts(labels, shares)[share]) if labels else []
     except Exception:  # noqa: BLE001  (the deciding task solves the start itself and reports any error)
         return []
+
+
+def shareable_starts(payload: dict[str, Any], problem: Any = None) -> list[str]:
+    """The starts of a task that other workers can solve for it: its strategy's certain starts, or none.
+
+    None for a field problem (the shooting method has no starts) or a multi-start guess (one start, its own).
+    ``problem`` is the task's validated problem, if already at hand.
+    """
+    from ..direct.strategy import certain_starts
+
+    problem = problem if problem is not None else task_problem(payload)
+    if problem.solver.method == "shooting" or payload.get("guess_seed") is not None:
+        return []
+    return certain_starts(problem)
 
 
 def task_problem(payload: dict[str, Any]) -> Any:

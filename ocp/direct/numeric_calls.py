@@ -84,9 +84,7 @@ class BufferedFunction:
         if len(args) != len(self.shapes_in):
             raise ValueError(f"{self.function.name()}: expected {len(self.shapes_in)} arguments, got {len(args)}")
         if not self.dense:
-            plain = [self._defaults[i] if a is None else a for i, a in enumerate(args)]
-            out = self.function.call(plain)
-            return [np.asarray(v, float).reshape(shape) for v, shape in zip(out, self.shapes_out, strict=True)]
+            return self._plain(args)
         buffer, evaluate, inputs, outputs = self._buffer()
         for i, (value, target, (rows, cols)) in enumerate(zip(args, inputs, self.shapes_in, strict=True)):
             if value is None:
@@ -102,10 +100,13 @@ class BufferedFunction:
             target[:] = array.reshape(rows, cols).ravel(order="F") if cols > 1 and rows > 1 else array.ravel()
         evaluate()
         if buffer.ret() != 0:  # an evaluation error: the plain call raises CasADi's own message
-            out = self.function.call([np.asarray(a, float) if a is not None else self._defaults[i]
-                                      for i, a in enumerate(args)])  # fmt: skip
-            return [np.asarray(v, float).reshape(shape) for v, shape in zip(out, self.shapes_out, strict=True)]
+            return self._plain(args)
         return [o.reshape(cols, rows).T.copy() for o, (rows, cols) in zip(outputs, self.shapes_out, strict=True)]
+
+    def _plain(self, args: list[Any]) -> list[np.ndarray]:
+        """CasADi's own call (through ``DM``), the results as arrays ``(rows, cols)``."""
+        out = self.function.call([self._defaults[i] if a is None else a for i, a in enumerate(args)])
+        return [np.asarray(v, float).reshape(shape) for v, shape in zip(out, self.shapes_out, strict=True)]
 
 
 class ParameterMemo:
