@@ -63,7 +63,7 @@ def _attrs_key(attrs: dict[str, Any]) -> Any:
     """A comparable stand-in for a variable's attributes: its (name, text) pairs, or their JSON if not all text.
 
     A solution's variables carry text attributes only (``long_name``, ``units``); the pairs compare as the JSON
-    text did, at a fraction of its cost (a sweep computes two keys per task and variable at every flush).
+    text did, at a fraction of its cost (a sweep computes one key per task and variable at every flush).
     """
     if all(type(v) is str for v in attrs.values()):
         return tuple(sorted(attrs.items()))

@@ -164,8 +164,7 @@ def _context(
     # the NLP objective is J / cost_scale = O(1): the scale follows the cost however small (M SPD makes it > 0);
     # an absolute floor would make tiny-cost problems (M = 1e-40) optimise the control energy alone
     values["cost_scale"] = max(abs(coasting.cost), 1e-300)
-    P = tr.layout.pack(values)
-    ctx = SolveContext(problem, tr, values, lambda: initial_guess(tr, coasting, P), progress)
+    ctx = SolveContext(problem, tr, values, lambda P: initial_guess(tr, coasting, P), progress)
     return ctx, coasting, order
 
 

@@ -58,15 +58,15 @@ __all__ = [
 class SolveContext:
     """What every start of one solve shares: the problem, its NLP, the coasting guess, the step record.
 
-    ``guess`` makes the coasting guess (:attr:`w0`) when a start first needs it: a warm-started solve never
-    does. ``values`` are the parameter blocks (:meth:`mobisense.ocp.model.ParameterLayout.values`), not
-    changed once the context exists.
+    ``guess(P)`` makes the coasting guess (:attr:`w0`) from the parameters at ε = 1 when a start first needs
+    it: a warm-started solve never does. ``values`` are the parameter blocks
+    (:meth:`mobisense.ocp.model.ParameterLayout.values`), not changed once the context exists.
     """
 
     problem: Problem
     tr: DirectCollocation
     values: dict[str, Any]
-    guess: Callable[[], np.ndarray]
+    guess: Callable[[np.ndarray], np.ndarray]
     progress: Callable[[HomotopyStep], None] | None = None
     steps: list[HomotopyStep] = field(default_factory=list)
     #: starts already solved elsewhere, by label (:meth:`Continuation.record`), adopted instead of solved
@@ -78,7 +78,7 @@ class SolveContext:
     def w0(self) -> np.ndarray:
         """The coasting guess (scaled decision vector, shape (nw,)), made on first use."""
         if self._w0 is None:
-            self._w0 = self.guess()
+            self._w0 = self.guess(self.parameters(1.0))
         return self._w0
 
     def parameters(self, eps: float) -> np.ndarray:

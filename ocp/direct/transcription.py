@@ -147,7 +147,7 @@ class DirectCollocation:
         self.nw = self.maps.nw
         nlp = assemble(k, self.functions, self.maps, K)
         self._nlp, self._derivatives, self.cost_terms, self.ng = nlp.nlp, nlp.derivatives, nlp.cost_terms, nlp.ng
-        # numeric evaluations on numpy arrays, without CasADi's per-number conversions (buffered.py)
+        # numeric evaluations on numpy arrays, without CasADi's per-number conversions (numeric_calls.py)
         self._costs = BufferedFunction(self.cost_terms)
         self._nodes = BufferedFunction(k.k_nodes.map(K, "serial"))
         self._pv_gradient = BufferedFunction(k.k_pv.map(K, "serial"))
