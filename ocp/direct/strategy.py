@@ -297,8 +297,13 @@ def _budget(cold: Continuation, factor: float | None) -> int | None:
 
 
 def _fallback(runs: list[Continuation]) -> Continuation:
-    """What to report when no start converged: the continuation (it keeps the last ε solved), else the first."""
-    return next((r for r in runs if r.label == "homotopy"), runs[0])
+    """What to report when no start converged: the one that solved the largest ε, on a tie the first.
+
+    The continuation keeps its last ε solved (a solution of a nearby problem); a start that solved nothing
+    (a continuation with no iterations left in its budget) loses to the cold solve, whose Ipopt failure is
+    then reported.
+    """
+    return max(runs, key=lambda r: r.eps)
 
 
 def cold_strategy(ctx: SolveContext) -> tuple[list[Continuation], Continuation]:
@@ -318,7 +323,7 @@ def homotopy_strategy(ctx: SolveContext) -> tuple[list[Continuation], Continuati
     cold = _cold(ctx)
     homotopy = _homotopy(ctx, _budget(cold, options.budget))
     runs = [cold, homotopy]
-    return runs, homotopy if homotopy.solved else (_best(runs, ctx.problem.solver.agreement) or homotopy)
+    return runs, homotopy if homotopy.solved else (_best(runs, ctx.problem.solver.agreement) or _fallback(runs))
 
 
 def auto_strategy(ctx: SolveContext) -> tuple[list[Continuation], Continuation]:
@@ -356,8 +361,8 @@ def run_strategy(ctx: SolveContext) -> tuple[Continuation, dict[str, Any]]:
     -------
     kept : Continuation
         The start whose solution is reported: the converged start of lowest cost (``homotopy``: the
-        continuation when it converged); when none converged, the continuation (it keeps the last ε
-        solved), else the cold solve.
+        continuation when it converged); when none converged, the start that solved the largest ε (the
+        continuation keeps its last ε solved), on a tie the first (the cold solve).
     record : dict
         ``strategy``, ``kept`` (label), ``homotopy_budget`` (iterations or None), ``starts``
         (:meth:`Continuation.summary` of each).

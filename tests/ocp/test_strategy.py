@@ -106,3 +106,35 @@ def test_background_compile_serves_the_next_run(tmp_path):
     point = [0.3, -1.2, 2.0]
     np.testing.assert_allclose(np.asarray(loaded["bg_kernel"](point)), np.asarray(functions["bg_kernel"](point)))
     assert not list(tmp_path.glob(".kernels_*"))  # saved functions, source and marker removed
+
+
+def test_when_no_start_converges_the_one_that_got_furthest_is_kept():
+    # every Ipopt call stops at once (1e-9 s): no start solves any ε, so the tie goes to the first start, the
+    # cold solve, whose Ipopt status and worst-violated constraint are reported — not the continuation, which
+    # had no iterations left to try anything (its budget is what the starts took: 0)
+    problem = Problem.from_dict(hussein2008(collocation={"intervals": 20}, time_limit=1e-9))
+    solution = solve_direct(problem)
+    assert solution.status == "failed" and solution.stats["strategy"]["kept"] == "cold"
+    assert [s["start"] for s in solution.stats["strategy"]["starts"]][-1] == "homotopy"  # it was there
+    assert solution.message.startswith("Ipopt returned Maximum_WallTime_Exceeded at ε = 1; last ε solved = 0;")
+
+
+def test_a_kept_start_that_never_failed_on_its_own_says_why_it_did_not_converge(monkeypatch):
+    # a strategy (a plug-in, say) that keeps a continuation whose budget was spent before its first step:
+    # the message must not claim convergence; it names the budget and the last Ipopt failure of the solve
+    from mobisense.ocp.direct.strategy import solve_labelled
+    from mobisense.ocp.registries import STRATEGIES
+
+    def spent(ctx):  # noqa: ANN001, ANN202
+        runs = [solve_labelled(ctx, "cold"), ctx.start("homotopy", budget=0)]
+        assert not runs[1].attempt(0.05) and runs[1].failed is None  # nothing tried: no failure of its own
+        return runs, runs[1]
+
+    monkeypatch.setitem(STRATEGIES._entries, "spent budget", spent)
+    problem = Problem.from_dict(hussein2008(collocation={"intervals": 20}, time_limit=1e-9, strategy="spent budget"))
+    solution = solve_direct(problem)
+    assert solution.status == "failed"
+    assert solution.message == (
+        "no start converged at ε = 1: homotopy stopped at ε = 0 (its iteration budget was used up); "
+        "the last failure: Ipopt returned Maximum_WallTime_Exceeded at ε = 1 (cold)"
+    )
