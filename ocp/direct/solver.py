@@ -111,11 +111,12 @@ def solve_direct(
             f"(violation {worst['violation']:.3g})"
         )
     elif not solved:  # the kept start never ran into a failure of its own (its iteration budget was spent first)
-        failures = [step for step in ctx.steps if not step.success]
-        last = f"; the last failure: Ipopt returned {failures[-1].status} at ε = {failures[-1].eps:g} " \
-            f"({failures[-1].start})" if failures else ""
         why = "its iteration budget was used up" if kept.exhausted else "it was not run"
-        message = f"no start converged at ε = 1: {kept.label} stopped at ε = {kept.eps:g} ({why}){last}"
+        message = f"no start converged at ε = 1: {kept.label} stopped at ε = {kept.eps:g} ({why})"
+        failures = [step for step in ctx.steps if not step.success]
+        if failures:
+            last = failures[-1]
+            message += f"; the last failure: Ipopt returned {last.status} at ε = {last.eps:g} ({last.start})"
     stats["total_time_s"] = time.perf_counter() - t_start
     return _assemble(problem, kept, coasting, order, solved, message, stats)
 
