@@ -85,7 +85,13 @@ class SolveReporter:
                 for violation in s["baseline_violations"]:
                     table.add_row("  baseline violates", violation)
         if steps and solution.method != "indirect":  # the indirect rows below tell its continuation
-            table.add_row("homotopy: ε steps", f"{len(steps)} (ε reached {solution.eps:g})")
+            strategy = solution.stats.get("strategy") or {}
+            starts = strategy.get("starts") or []
+            if len(starts) > 1:  # several starts (solver.strategy): their steps together
+                table.add_row("starts solved", f"{len(starts)} ({strategy.get('kept')} kept)")
+                table.add_row("  ε steps of all starts", f"{len(steps)} (ε reached {solution.eps:g})")
+            else:
+                table.add_row("homotopy: ε steps", f"{len(steps)} (ε reached {solution.eps:g})")
             iterations = sum(x.iterations for x in steps)
             table.add_row("  Ipopt iterations", f"{iterations} (first step {steps[0].iterations})")
             table.add_row("  time of the ε steps", f"{s['solve_time_s']:.3f} s (first step {steps[0].time_s:.3f} s)")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import pytest
 import yaml
@@ -61,6 +62,10 @@ def test_solve_writes_the_contract(tmp_path, capsys):
     for figure in ("paths.png", "covariance.png", "controls.png", "homotopy.png", "solution.nc"):
         assert (out / figure).stat().st_size > 0
     assert "improvement" in stdout
+    # the table counts the starts and names the kept one (the ε steps are those of all the starts)
+    starts = len(summary["strategy"]["starts"])
+    assert re.search(rf"starts solved\s*│\s*{starts} \({kept} kept\)", stdout)
+    assert re.search(rf"ε steps of all starts\s*│\s*{len(summary['homotopy'])} \(ε reached 1\)", stdout)
     assert not list(out.glob(".*.tmp"))
 
 
