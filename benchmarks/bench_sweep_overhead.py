@@ -63,7 +63,7 @@ def write_sweep(folder: Path, count: int = 8) -> Path:
 def serial(path: Path, folder: Path) -> dict[str, Any]:
     """The same tasks as one chain in this process, solutions written as part files."""
     spec, base = load_sweep(path)
-    t0 = time.perf_counter()
+    cpu0, t0 = time.process_time(), time.perf_counter()
     tasks = expand_sweep(spec, base, str(path))
     rows, datasets, previous, durations = [], [], None, []
     for i in snake_order([t.coordinates() for t in tasks], [t.structure for t in tasks]):
@@ -77,7 +77,8 @@ def serial(path: Path, folder: Path) -> dict[str, Any]:
     wall = time.perf_counter() - t0
     # a warm task's share: its solve, and its part of the validation and of the file write
     warm = (wall - durations[0]) / (len(rows) - 1) if len(rows) > 1 else float("nan")
-    return {"wall": wall, "rows": rows, "writes": time.perf_counter() - t1, "head": durations[0], "warm": warm}
+    return {"wall": wall, "rows": rows, "writes": time.perf_counter() - t1, "head": durations[0], "warm": warm,
+            "cpu": time.process_time() - cpu0}  # fmt: skip
 
 
 def parallel(path: Path, out: Path, client: Any) -> dict[str, Any]:
@@ -95,9 +96,12 @@ def parallel(path: Path, out: Path, client: Any) -> dict[str, Any]:
     runner.write_task_files = timed  # type: ignore[assignment]
     try:
         with get_task_stream(client) as stream:
+            workers0, cpu0 = client.run(time.process_time), time.process_time()  # CPU time of each process
             t0, epoch = time.perf_counter(), time.time()
             result = run_sweep(path, out, scheduler=client.scheduler.address, warm_start=True)
             wall = time.perf_counter() - t0
+            cpu_client = time.process_time() - cpu0
+            cpu_workers = sorted(t - workers0[w] for w, t in client.run(time.process_time).items())
     finally:
         runner.write_task_files = real_write  # type: ignore[assignment]
     names = {address: str(info["name"]) for address, info in client.scheduler_info()["workers"].items()}
@@ -108,7 +112,8 @@ def parallel(path: Path, out: Path, client: Any) -> dict[str, Any]:
                 start, stop = span["start"] - epoch, span["stop"] - epoch
                 computes.setdefault(names[task["worker"]], []).append((start, stop, task["key"]))
     return {"wall": wall, "rows": result.table.to_dict("records"), "writes": spent[0],
-            "computes": {w: sorted(c) for w, c in computes.items()}}  # fmt: skip
+            "computes": {w: sorted(c) for w, c in computes.items()}, "cpu_client": cpu_client,
+            "cpu_workers": cpu_workers}  # fmt: skip
 
 
 def measure(client: Any, folder: Path, alphas: int, repeats: int, workers: int) -> None:
@@ -172,6 +177,14 @@ def measure(client: Any, folder: Path, alphas: int, repeats: int, workers: int) 
           f"{1e3 * idle:.1f} ms + in the workers' dask tasks outside the rows' own time "
           f"{1e3 * (overhead - outside - gaps - idle):.1f} ms; client file writes {1e3 * writes:.1f} ms "
           "(client)")  # fmt: skip
+    cpu_serial, cpu_client = med(r["cpu"] for r in runs["serial"]), med(r["cpu_client"] for r in runs["parallel"])
+    cpu_workers = [med(r["cpu_workers"][k] for r in runs["parallel"]) for k in range(workers)]
+    floor = (cpu_client + sum(cpu_workers)) / min(workers, os.cpu_count() or 1)
+    print(f"  CPU time (core-s): serial run {cpu_serial:.2f}; run_sweep: client process {cpu_client:.2f} (main thread, "
+          f"scheduler, nannies), workers " + " + ".join(f"{c:.2f}" for c in cpu_workers) + f" (least to most) = "
+          f"{cpu_client + sum(cpu_workers):.2f} in all, {(cpu_client + sum(cpu_workers)) / cpu_serial:.2f}x the "
+          f"serial run's; spread over {min(workers, os.cpu_count() or 1)} cores with no idle core it needs {floor:.2f} "
+          f"s: at most {t_serial / floor:.2f}x for the work this run did (information, not a target)")  # fmt: skip
     print(f"  the engine's own work per task (all but Ipopt and idle time): {1e3 * (overhead - idle):.1f} ms "
           "(information, not the target)")
     print(f"{'PASS' if warm_speedup >= 1.6 else 'MISS'}  warm-started tasks vs serial on {workers} workers: "
