@@ -62,12 +62,12 @@ def build_parser(commands: Sequence[str] | None = None) -> argparse.ArgumentPars
         The sub-commands whose arguments are added (default: all). The others get only their help line: the
         command line adds the arguments of the one command it runs (its options import what they list).
     """
-    parser = _Parser(prog="mobisense", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="mobisense", description=__doc__.splitlines()[0].replace("``", ""))
     parser.add_argument("--version", action="version", version=f"mobisense {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
     for name in COMMANDS:
         command = _command(name)
-        help_line = (command.__doc__ or "").strip().splitlines()[0]
+        help_line = (command.__doc__ or "").strip().splitlines()[0].replace("``", "")
         command_parser = sub.add_parser(name, help=help_line, description=help_line)
         if commands is None or name in commands:
             command.add_arguments(command_parser)

@@ -99,7 +99,10 @@ class ExamplesCommand:
                 written = copy_examples(args.copy, overwrite=args.force)
             except FileExistsError as err:
                 raise ConfigError(f"{err}; use --force to overwrite") from None
-            print(f"{len(written)} example files written to {args.copy}/; run one with, e.g.,")
+            kept = len(EXAMPLES) - len(written)
+            same = f" ({kept} already there, unchanged)" if kept else ""
+            files = "file" if len(written) == 1 else "files"
+            print(f"{len(written)} example {files} written to {args.copy}/{same}; run one with, e.g.,")
             print(f"  mobisense solve {args.copy / 'hussein2008.yaml'}")
             return 0
         width = max(len(e.name) for e in EXAMPLES)

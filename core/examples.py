@@ -11,7 +11,15 @@ from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
-__all__ = ["Example", "EXAMPLES", "examples_folder", "shipped_examples", "resolve_input", "copy_examples"]
+__all__ = [
+    "Example",
+    "EXAMPLES",
+    "examples_folder",
+    "shipped_examples",
+    "resolve_input",
+    "example_hint",
+    "copy_examples",
+]
 
 
 @dataclass(frozen=True)
@@ -83,11 +91,27 @@ def resolve_input(path: str | Path) -> Path:
     return shipped if shipped is not None and shipped.is_file() else path
 
 
+def example_hint(path: str | Path) -> str:
+    """For a missing input file: ``"; did you mean the shipped example 'NAME'? …"`` when its name is close to one.
+
+    ``problems/hussein2008.yaml`` outside a clone, or a misspelled ``hussein2009``, point to the example that
+    a bare name reads (:func:`resolve_input`); an empty string when no example's name is close.
+    """
+    import difflib
+
+    stem = Path(path).name.removesuffix(".yaml").removesuffix(".yml")
+    close = difflib.get_close_matches(stem[:200], [e.name for e in EXAMPLES], n=1, cutoff=0.8)
+    if not close:
+        return ""
+    return f"; did you mean the shipped example '{close[0]}'? (a bare name reads it; 'mobisense examples' lists them)"
+
+
 def copy_examples(folder: str | Path, overwrite: bool = False) -> list[Path]:
     """Write every shipped example into ``folder`` (created if needed); return the files written.
 
-    Files that already exist with other content are kept unless ``overwrite``; the references between
-    examples (a sweep's ``base``, a replay's ``problem``) are relative, so the copies work as a set.
+    Files that already exist with the same content are left as they are (and not returned); files with other
+    content are kept unless ``overwrite``. The references between examples (a sweep's ``base``, a replay's
+    ``problem``) are relative, so the copies work as a set.
 
     Raises
     ------
@@ -104,9 +128,12 @@ def copy_examples(folder: str | Path, overwrite: bool = False) -> list[Path]:
         if (folder / src.name).exists() and (folder / src.name).read_bytes() != src.read_bytes()
     ]
     if clashes and not overwrite:
-        raise FileExistsError(f"{clashes[0]} exists with other content (and {len(clashes) - 1} more)")
+        more = f" (and {len(clashes) - 1} more)" if len(clashes) > 1 else ""
+        raise FileExistsError(f"{clashes[0]} exists with other content{more}")
     written = []
     for src in sources.values():
+        if (folder / src.name).is_file() and (folder / src.name).read_bytes() == src.read_bytes():
+            continue
         with atomic_path(folder / src.name) as tmp:
             tmp.write_bytes(src.read_bytes())
         written.append(folder / src.name)

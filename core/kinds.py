@@ -17,7 +17,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["FileKind", "FILE_KINDS", "detect_kind", "kind_model", "check_file", "load_target"]
+__all__ = [
+    "FileKind",
+    "FILE_KINDS",
+    "detect_kind",
+    "apparent_kind",
+    "check_command_kind",
+    "load_as",
+    "kind_model",
+    "check_file",
+    "load_target",
+]
 
 
 @dataclass(frozen=True)
@@ -128,6 +138,62 @@ def detect_kind(data: Any, source: str | Path) -> str:
         return fits[0]
     which = "fits several kinds (" + ", ".join(fits) + ")" if fits else "fits no kind"
     raise ConfigError(f"{source}: (top level): the file {which}; add 'kind: …' (one of {', '.join(names)})")
+
+
+def apparent_kind(data: Any) -> str | None:
+    """The kind a parsed document says it is (a known ``kind:``) or has the shape of (one kind only); else None."""
+    if not isinstance(data, dict):
+        return None
+    kind = data.get("kind")
+    if "kind" in data:
+        return kind if isinstance(kind, str) and kind in FILE_KINDS else None
+    fits = [name for name, file_kind in FILE_KINDS.items() if file_kind.shape(data)]
+    return fits[0] if len(fits) == 1 else None
+
+
+def check_command_kind(data: Any, source: str | Path, expected: tuple[str, ...]) -> None:
+    """Refuse a file that is plainly of another kind than a command runs, naming the command that runs it.
+
+    A file given to the wrong command (``mobisense steady-state hussein2008``) would otherwise be reported by
+    the model it does not follow ("noise: required key is missing (and 6 more problems)"). It is plainly
+    another kind when its ``kind:`` key says so, or when it has the shape of no ``expected`` kind and of
+    exactly one other (:func:`apparent_kind`); anything less clear is left to the model's own report.
+
+    Raises
+    ------
+    ConfigError
+        ``FILE: kind: …`` or ``FILE: (top level): …``, saying what the file looks like and which command runs it.
+    """
+    from .config import ConfigError
+
+    found = apparent_kind(data)
+    if found is None or found in expected:
+        return
+    title = FILE_KINDS[found].title
+    what = f"{'an' if title[0] in 'aeiou' else 'a'} {title} file"
+    names = ", ".join(expected[:-1]) + (" or " if len(expected) > 1 else "") + expected[-1]
+    advice = f"run it with '{FILE_KINDS[found].command} {source}' (this reads {names} files)"
+    if "kind" in data:
+        raise ConfigError(f"{source}: kind: {what}; {advice}")
+    if any(FILE_KINDS[e].shape(data) for e in expected):
+        return
+    raise ConfigError(f"{source}: (top level): this looks like {what}; {advice}")
+
+
+def load_as(path: str | Path, kind: str) -> Any:
+    """Read and validate a file of kind ``kind`` (its model instance), refusing a file of another kind.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the file, the key path and what was expected (:func:`check_command_kind`, then the
+        model's own validation).
+    """
+    from .config import parse_config, read_yaml
+
+    data = read_yaml(path)
+    check_command_kind(data, path, (kind,))
+    return parse_config(data, kind_model(kind), source=str(path))
 
 
 def check_file(path: str | Path) -> tuple[str, str]:

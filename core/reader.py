@@ -97,8 +97,11 @@ def read_bytes(path: str | Path, limit: int = MAX_BYTES, what: str = "file") -> 
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
     except FileNotFoundError:
-        kind = "broken symbolic link" if path.is_symlink() else "file not found"
-        raise ConfigError(f"{path}: {kind}") from None
+        if path.is_symlink():
+            raise ConfigError(f"{path}: broken symbolic link") from None
+        from .examples import example_hint
+
+        raise ConfigError(f"{path}: file not found{example_hint(path)}") from None
     except IsADirectoryError:
         raise ConfigError(f"{path}: is a directory, expected a {what}") from None
     except OSError as exc:

@@ -33,15 +33,15 @@ class SteadyStateCommand:
         import math
 
         from ..core.budget import Estimate, check_budget
-        from ..core.config import load_config
         from ..core.errors import ComputationError, numerical_failures
         from ..core.examples import resolve_input
+        from ..core.kinds import load_as
         from ..core.output import OutputFolder, default_output_folder
-        from .cooperative.design_study import FormationFile, design_formation
+        from .cooperative.design_study import design_formation
 
         args.formation = resolve_input(args.formation)
         source = str(args.formation)
-        config = load_config(args.formation, FormationFile)  # ConfigError -> exit 2, nothing written
+        config = load_as(args.formation, "formation")  # ConfigError -> exit 2, nothing written
         grid = config.contour_resolution**2
         check_budget([Estimate("the tr P grid", 8.0 * 8 * grid, "a lower contour_resolution", 2e-6 * grid)],
                      args.max_memory, source, args.max_time)  # fmt: skip

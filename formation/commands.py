@@ -117,6 +117,10 @@ def _simulate(args: argparse.Namespace, kind: str, run: Callable[[Any], Any]) ->
     args.scenario = resolve_input(args.scenario)
     source = str(args.scenario)
     scenario = load_scenario(args.scenario, kind)  # ConfigError -> exit 2, nothing written
+    if getattr(args, "animate", False) and scenario.kind != "field_replay":
+        from ..core.errors import ConfigError
+
+        raise ConfigError(f"{source}: --animate: only a field replay is animated, this is a {scenario.kind} file")
     check_budget(scenario.estimates(), args.max_memory, source, args.max_time)
     folder = OutputFolder.check(args.out if args.out is not None else default_output_folder(args.scenario))
     with folder.lock():

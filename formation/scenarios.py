@@ -24,7 +24,7 @@ from typing import Any
 
 from .simulation_result import SimulationResult
 
-__all__ = ["SCENARIO_KINDS", "Scenario", "load_scenario", "scenario_model"]
+__all__ = ["SCENARIO_KINDS", "REPLAY_KINDS", "Scenario", "load_scenario", "scenario_model"]
 
 #: scenario kind -> "module:model class" of its file
 SCENARIO_KINDS: dict[str, str] = {
@@ -34,6 +34,8 @@ SCENARIO_KINDS: dict[str, str] = {
     "distributed": "mobisense.formation.distributed.simulation:DistributedScenario",
     "replan": "mobisense.formation.replay.replan:ReplanScenario",
 }
+#: the kinds ``mobisense replay`` runs
+REPLAY_KINDS = ("field_replay", "plan_replay", "replan")
 
 
 @dataclass
@@ -104,7 +106,7 @@ def replay_kind(data: Any, source: Path) -> str:
         )
     kind = data.get("kind")
     kind = kind if isinstance(kind, str) else None  # a list or mapping is reported by the model
-    if kind in ("field_replay", "plan_replay", "replan"):
+    if kind in REPLAY_KINDS:
         return str(kind)
     if kind in FILE_KINDS:
         raise ConfigError(f"{source}: kind: a {kind} file is not a replay: run it with {FILE_KINDS[kind].command}")
@@ -119,27 +121,35 @@ def replay_kind(data: Any, source: Path) -> str:
 
 
 def load_scenario(path: str | Path, kind: str | None = None) -> Scenario:
-    """Read and validate a scenario file.
+    """Read and validate a scenario file, or a shipped example by name (``load_scenario("replay_two_charges")``).
 
     Parameters
     ----------
     path : str or Path
-        The YAML file.
+        The YAML file, or the name of a shipped example (:func:`mobisense.core.examples.resolve_input`).
     kind : str, optional
-        One of :data:`SCENARIO_KINDS`, or ``"replay"`` (default) to tell a field replay from a plan
-        replay by its keys.
+        One of :data:`SCENARIO_KINDS`; ``"replay"`` for one of the kinds ``mobisense replay`` runs (a field
+        replay, a plan replay, a re-planning file), told apart by their keys; default: any scenario kind,
+        told by the file's ``kind:`` key or its shape (:func:`mobisense.core.kinds.apparent_kind`).
 
     Raises
     ------
     ConfigError
-        One line naming the file and the key path.
+        One line naming the file and the key path; a file of another kind (a problem, a formation design)
+        is refused with the command that runs it.
     """
     from ..core.config import ConfigError, parse_config, read_yaml
+    from ..core.examples import resolve_input
+    from ..core.kinds import apparent_kind, check_command_kind
 
-    path = Path(path)
+    path = resolve_input(path)
     data = read_yaml(path)
+    if kind is not None and kind != "replay" and kind not in SCENARIO_KINDS:
+        raise ConfigError(f"{path}: unknown scenario kind {kind!r}; expected one of {sorted(SCENARIO_KINDS)}")
+    expected = REPLAY_KINDS if kind == "replay" else (kind,) if kind else tuple(SCENARIO_KINDS)
+    check_command_kind(data, path, expected)
+    if kind is None:
+        kind = apparent_kind(data)
     if kind is None or kind == "replay":
         kind = replay_kind(data, path)
-    if kind not in SCENARIO_KINDS:
-        raise ConfigError(f"{path}: unknown scenario kind {kind!r}; expected one of {sorted(SCENARIO_KINDS)}")
     return Scenario(kind, parse_config(data, scenario_model(kind), source=str(path)), path)

@@ -38,7 +38,11 @@ class SolveCommand:
             "--scheme", choices=SCHEMES.names(), default=None, help="override solver.collocation.scheme"
         )
         parser.add_argument(
-            "--homotopy", choices=HOMOTOPY_MODES.names(), default=None, help="override solver.homotopy.mode"
+            "--homotopy",
+            choices=HOMOTOPY_MODES.names(),
+            default=None,
+            help="override solver.homotopy.mode (the ε-continuation: always run by --strategy homotopy, by auto only "
+            "when its starts disagree)",
         )
         parser.add_argument("--step", type=float, default=None, help="override solver.homotopy.step (δ)")
         parser.add_argument(
@@ -69,8 +73,8 @@ class SolveCommand:
             type=positive_int,
             default=None,
             metavar="K",
-            help="solve from K initial guesses (start 0: the homotopy; others: random feasible "
-            "trajectories solved at ε = 1) on dask workers and keep the best",
+            help="solve from K initial guesses (start 0: the problem's solve strategy, solver.strategy; others: "
+            "random feasible trajectories solved at ε = 1) on dask workers and keep the best",
         )
         add_cluster_arguments(parser, "--multistart")
         add_budget_argument(parser)
@@ -89,6 +93,7 @@ def _solve(args: argparse.Namespace, figures: Any) -> int:
     from ..core.config import ConfigError, read_yaml
     from ..core.errors import numerical_failures
     from ..core.examples import resolve_input
+    from ..core.kinds import check_command_kind
     from ..core.output import OutputFolder, default_output_folder
     from .batch.cluster import Cluster
     from .problem import Problem
@@ -97,7 +102,9 @@ def _solve(args: argparse.Namespace, figures: Any) -> int:
 
     args.problem = resolve_input(args.problem)
     source = str(args.problem)
-    data = apply_overrides(read_yaml(args.problem), args)
+    data = read_yaml(args.problem)
+    check_command_kind(data, source, ("problem",))  # a formation, sweep, … file: the command that runs it
+    data = apply_overrides(data, args)
     problem = Problem.from_dict(data, source=source)  # ConfigError -> exit 2, nothing written
     cluster = Cluster.from_args(args)
     if args.multistart is None and (cluster.scheduler or cluster.workers):

@@ -12,7 +12,7 @@ Every number is an NLP parameter (blocks ``keepout_k``, ``min_separation``, ``ma
 the structure (which constraints, how many vertices) is part of :class:`~mobisense.ocp.model.Structure`.
 :func:`path_rows` gives the scaled rows ``g ≤ 0`` of one collocation node (eq. path.1–path.5), enforced by
 the direct method at every collocation node; :func:`margins` the exact physical margins (numpy) used to
-check the re-simulated path between the nodes (:mod:`mobisense.ocp.path_report`).
+check the re-simulated path between the nodes (:mod:`mobisense.ocp.direct.path_report`).
 """
 
 from __future__ import annotations

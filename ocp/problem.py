@@ -41,7 +41,6 @@ from ..core.config import (
     check_shape,
     check_spd,
     check_square,
-    load_config,
     parse_config,
 )
 from ..core.units import LengthUnit, PhysicalUnit, TimeUnit, UnitSystem
@@ -438,5 +437,6 @@ def load_problem(path: str | Path) -> Problem:
     Raises :class:`mobisense.core.config.ConfigError` (one line naming the file and the key path).
     """
     from ..core.examples import resolve_input
+    from ..core.kinds import load_as
 
-    return load_config(resolve_input(path), Problem)
+    return load_as(resolve_input(path), "problem")

@@ -71,14 +71,19 @@ class SolveReporter:
         )
         table.add_column("quantity")
         table.add_column("value", justify="left")
-        table.add_row("J (ε = 1)", f"{s['cost']:.10g}")
+        solved = solution.success
+        # a failed solve holds the plan of the last ε it solved; its J is the true cost (ε = 1 weights) of that plan
+        label = "J (ε = 1)" if solved else f"J of the plan held (ε = {solution.eps:g})"
+        table.add_row(label, f"{s['cost']:.10g}")
         table.add_row("  terminal Tr[MΣ(tf)]", f"{s['terminal_cost']:.10g}")
         table.add_row("  running ∫(α/2|u|² + Tr KΣ)", f"{s['running_cost']:.6g}")
         table.add_row("  control energy ∫α/2|u|²", f"{s['control_energy']:.6g}")
         base = solution.baseline.get("cost")
         if base is not None:
             table.add_row("no-control baseline J (u ≡ 0)", f"{base:.10g}")
-            if s["baseline_feasible"]:
+            if not solved:
+                table.add_row("improvement over the baseline", "none quoted: the solve did not reach ε = 1")
+            elif s["baseline_feasible"]:
                 table.add_row("improvement over the baseline", f"{s['improvement_percent']:.2f} %")
             else:
                 table.add_row("improvement over the baseline", "none quoted: the baseline is infeasible")

@@ -381,8 +381,8 @@ class Solution:
             f"  n = {self.problem.n} process states, N = {self.problem.N} sensors, "
             f"t ∈ [{self.t[0]:g}, {self.t[-1]:g}]: {len(self.t)} state times, {len(self.t_u)} control times",
             f"  costates: {'on ' + str(len(self.t_costate)) + ' times' if self.t_costate is not None else 'none'}; "
-            f"homotopy: {len(self.homotopy)} steps, {sum(s.iterations for s in self.homotopy)} iterations, "
-            f"{sum(s.time_s for s in self.homotopy):.3g} s",
+            f"{len(self.homotopy)} Ipopt solve{'s' if len(self.homotopy) != 1 else ''} (ε steps of every start), "
+            f"{sum(s.iterations for s in self.homotopy)} iterations, {sum(s.time_s for s in self.homotopy):.3g} s",
             f"  {self.message}",
         ]
         return "\n".join(lines)

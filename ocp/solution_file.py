@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from ..core.errors import ConfigError, one_line
+from ..core.errors import ConfigError, brief, one_line
 from ..core.reader import parse_document
 from .problem import Problem
 
@@ -61,7 +62,16 @@ def _one_task(ds: Any, path: Path, task: int | None) -> Any:
         held = ", ".join(str(int(i)) for i in ds["task"].values[:8])
         raise ConfigError(f"{path}: holds several tasks of a sweep ({held}, …); name one (task: INDEX)")
     try:
-        return task_dataset(ds.load(), int(task))
+        if isinstance(task, bool):
+            raise TypeError
+        index = operator.index(task)
+    except TypeError:
+        raise ConfigError(
+            f"{path}: task: expected the task's sweep index, an integer (the index column of results.parquet; its "
+            f"task column is the problem hash), got {brief(task)}"
+        ) from None
+    try:
+        return task_dataset(ds.load(), index)
     except KeyError as exc:
         raise ConfigError(f"{path}: task: {exc.args[0]}") from None
 

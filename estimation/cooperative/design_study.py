@@ -22,7 +22,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from ...core.config import InvalidValue, PositiveFloat, StrictModel, Vector2, load_config
+from ...core.config import InvalidValue, PositiveFloat, StrictModel, Vector2
 from .noise_config import NoiseConfig
 
 __all__ = ["FormationFile", "ShapeBounds", "DesignStudy", "design_formation"]
@@ -135,9 +135,15 @@ class DesignStudy:
 
 
 def design_formation(config: FormationFile | str | Path) -> DesignStudy:
-    """Design the steady-state formation described by ``config`` (a :class:`FormationFile` or its YAML path)."""
+    """Design the steady-state formation described by ``config``.
+
+    ``config`` is a :class:`FormationFile`, its YAML path, or a shipped example's name (``"formation_cross"``).
+    """
     if not isinstance(config, FormationFile):
-        config = load_config(config, FormationFile)
+        from ...core.examples import resolve_input
+        from ...core.kinds import load_as
+
+        config = load_as(resolve_input(config), "formation")
     if config.formation == "custom":
         return DesignStudy(config, _custom_summary(config))
     summary, design = _cross_summary(config)

@@ -101,6 +101,27 @@ class ReplanResult(SimulationResult):
 
     kind = "replan"
 
+    def report(self, folder: Path) -> None:
+        """The three policies' realised costs (mean ± standard error over the runs), the re-solves, the files."""
+        s = self.summary
+
+        def cost(policy: str) -> str:
+            c = s[policy]
+            return f"{c['cost_mean']:.6g} ± {c['cost_stderr']:.2g}"
+
+        runs = self.dataset.sizes.get("run", 0)
+        print(
+            f"{s['problem']}: re-planned every {s['replan_every_s']:g} ({s['horizon']['kind']} horizon, "
+            f"{s['warm_start']} warm start) on {runs} runs: realised J closed loop {cost('closed_loop')}, "
+            f"open loop {cost('open_loop')}, no control {cost('no_control')} (the plan promised {s['plan_cost']:.6g})"
+        )
+        print(
+            f"  re-solves: median {1e3 * s['replan_solve_time_s']['median']:.1f} ms, max "
+            f"{1e3 * s['replan_solve_time_s']['max']:.1f} ms, {s['replan_iterations']['median']:g} iterations "
+            f"(median); {s['replan_failures']} failed"
+        )
+        super().report(folder)
+
     def plot(self, folder: str | Path) -> list[Path]:
         """``replan.png``: the plans made at each instant fanning out along the flown path of run 0."""
         from ...core.files import write_figure

@@ -1,7 +1,8 @@
 """Multi-start: solve from several initial guesses on dask workers and count the distinct local optima.
 
-Start 0 is the ordinary ε-continuation from the coasting solution. Start k > 0 solves ε = 1 directly from
-a random feasible trajectory (:func:`mobisense.ocp.direct.guesses.random_guess` with seed k).
+Start 0 is the ordinary solve (the problem's ``solver.strategy``: by default ``auto``, a cold solve and random
+starts until they agree, see docs/theory/direct.md §5.6). Start k > 0 solves ε = 1 directly from a random
+feasible trajectory (:func:`mobisense.ocp.direct.guesses.random_guess` with seed k).
 """
 
 from __future__ import annotations
@@ -67,7 +68,7 @@ def solve_multistart(
     index = {id(s): k for k, s in enumerate(solutions)}
     for group in optima:
         group["starts"] = sorted(index[id(done[k])] for k in group["starts"])
-    # the best optimum, represented by its lowest start (start 0, the homotopy, when it found it)
+    # the best optimum, represented by its lowest start (start 0, the ordinary solve, when it found it)
     best = solutions[optima[0]["starts"][0]] if optima else done[0]
     best.stats["multistart"] = {"starts": starts, "converged": len(converged), "optima": optima, "errors": errors}
     return best

@@ -28,9 +28,10 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from ...core.budget import PROCESS_BYTES, Estimate
-from ...core.config import ConfigError, StrictModel, load_config
+from ...core.config import ConfigError, StrictModel
 from ...core.errors import brief
 from ...core.keypath import get_path, parse_key_path, with_values
+from ...core.kinds import load_as
 from ..model import Structure
 from ..problem import Problem, load_problem, problem_digest
 from ..sizes import direct_estimate, solution_bytes
@@ -105,7 +106,7 @@ class SweepTask:
 
 def load_sweep(path: str | Path) -> tuple[SweepSpec, Problem]:
     """Read a sweep file and its base problem (relative to the sweep file)."""
-    spec = load_config(path, SweepSpec)
+    spec = load_as(path, "sweep")
     base_path = Path(path).parent / spec.base
     if not base_path.is_file():
         raise ConfigError(f"{path}: base: file not found: {base_path}")

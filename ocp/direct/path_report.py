@@ -87,7 +87,8 @@ def constraint_report(problem: Problem, tr: Any, result: Any, P: np.ndarray, u: 
     ``max_violation`` is the largest physical violation (penetration depth (L), separation deficit (L),
     speed excess (L/T), distance outside the workspace (L); ≤ 0 means satisfied with that margin) on the
     re-simulated path; ``max_multiplier`` the largest multiplier of the group's rows in cost units per unit
-    of the row's physical value (zero when inactive).
+    of the row's physical value (zero when inactive); ``units`` the unit of ``max_violation``, the problem's
+    length (or speed) unit in UDUNITS, as in ``solution.nc``.
     """
     k, K, d = tr.kernels, tr.intervals, tr.colloc.degree
     if not k.n_cons:
@@ -103,7 +104,8 @@ def constraint_report(problem: Problem, tr: Any, result: Any, P: np.ndarray, u: 
     violation = margins(constraints, p, v)
     _, p_nodes, v_nodes = _node_states(tr, result, P)
     at_nodes = margins(constraints, p_nodes, v_nodes)
-    units = {"max_speed": "L/T"}
+    system = problem.units.system()  # the problem's declared units, as in solution.nc (UDUNITS)
+    length, speed = system.of(length=1), system.of(length=1, time=-1)
     out: dict[str, Any] = {}
     for name in group_names(tr.structure.path):
         mask = groups == name
@@ -114,7 +116,7 @@ def constraint_report(problem: Problem, tr: Any, result: Any, P: np.ndarray, u: 
             "max_violation_time": float(t[worst]),
             "max_violation_at_nodes": float(at_nodes[name].max()),
             "max_multiplier": float(np.abs(lam[:, mask]).max()),
-            "units": units.get(name, "L"),
+            "units": speed if name == "max_speed" else length,
         }
     return out
 

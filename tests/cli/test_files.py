@@ -93,6 +93,63 @@ def test_a_problem_file_may_say_kind_problem_and_other_commands_refuse_it(tmp_pa
     assert cli.main(["replay", str(path)]) == 2
 
 
+#: each command that reads a file, and a shipped example of every kind it does not run
+_COMMANDS = {
+    ("solve",): "problem", ("sweep",): "sweep", ("steady-state",): "formation",
+    ("simulate", "leader-follower"): "leader_follower", ("simulate", "distributed"): "distributed",
+}  # fmt: skip
+_ONE_OF_EACH = {kind: min(n for n, k in SHIPPED_KINDS.items() if k == kind) for kind in set(SHIPPED_KINDS.values())}
+
+
+@pytest.mark.parametrize("command", sorted(_COMMANDS), ids=" ".join)
+def test_a_command_given_a_file_of_another_kind_names_the_command_that_runs_it(command, tmp_path, capsys):
+    # not the model's complaint about the keys the file lacks ("noise: required key is missing (and 6 more
+    # problems)"), but what the file is and which command runs it; exit 2 and nothing written
+    for kind, name in sorted(_ONE_OF_EACH.items()):
+        if kind == _COMMANDS[command]:
+            continue
+        out = tmp_path / name
+        assert cli.main([*command, name, "--out", str(out)]) == 2, (command, name)
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "Traceback" not in err
+        said = "kind: a" if "kind" in _data(name) else "(top level): this looks like "  # replan_drift says its kind
+        assert f"{name}.yaml: {said}" in err, err
+        assert f"run it with '{FILE_KINDS[kind].command} " in err, err
+        assert not out.exists()
+
+
+def test_a_kind_key_of_another_kind_is_refused_with_its_command(tmp_path, capsys):
+    path = tmp_path / "p.yaml"
+    path.write_text(yaml.safe_dump({**hussein2008(), "kind": "sweep"}))
+    assert cli.main(["solve", str(path), "--out", str(tmp_path / "out")]) == 2
+    assert f"{path}: kind: a parameter sweep file; run it with 'mobisense sweep {path}'" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_missing_file_named_like_a_shipped_example_points_to_it(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # problems/hussein2008.yaml run outside a clone, or a misspelled name
+    for given, hint in (("problems/hussein2008.yaml", "hussein2008"), ("hussein2009", "hussein2008"),
+                        ("replay_two_chrges.yaml", "replay_two_charges")):  # fmt: skip
+        assert cli.main(["solve", given, "--out", "out"]) == 2
+        assert f"{given}: file not found; did you mean the shipped example '{hint}'?" in capsys.readouterr().err
+    assert cli.main(["solve", "nothing_like_it.yaml", "--out", "out"]) == 2
+    assert capsys.readouterr().err.strip().endswith("nothing_like_it.yaml: file not found")
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_api_loaders_take_example_names_and_tell_scenario_kinds_by_shape():
+    from mobisense import design_formation, load_scenario
+
+    for name, kind in SHIPPED_KINDS.items():
+        if kind in ("field_replay", "plan_replay", "replan", "leader_follower", "distributed"):
+            assert load_scenario(name).kind == kind, name
+            assert load_scenario(str(PROBLEMS / f"{name}.yaml")).kind == kind, name
+    assert design_formation("formation_cross").summary["formation"] == "cross"
+    with pytest.raises(ConfigError, match=r"hussein2008.yaml: \(top level\): this looks like an optimal-control "
+                                          r"problem file; run it with 'mobisense solve "):  # fmt: skip
+        load_scenario("hussein2008")
+
+
 @pytest.mark.parametrize("kind", sorted(FILE_KINDS))
 def test_schema_is_json_schema_that_accepts_the_shipped_files(kind, tmp_path):
     jsonschema = pytest.importorskip("jsonschema")
@@ -122,11 +179,16 @@ def test_examples_lists_one_line_each_and_copies_them(tmp_path, capsys):
         assert re.search(rf"^{example.name} +\S.*\[mobisense {example.command}\]$", out, flags=re.M)
     assert cli.main(["examples", "--copy", str(tmp_path / "ex")]) == 0
     assert sorted(p.name for p in (tmp_path / "ex").iterdir()) == sorted(f"{e.name}.yaml" for e in EXAMPLES)
+    assert f"{len(EXAMPLES)} example files written to {tmp_path / 'ex'}/;" in capsys.readouterr().out
     (tmp_path / "ex" / "hussein2008.yaml").write_text("changed")
-    with pytest.raises(FileExistsError):
+    with pytest.raises(FileExistsError, match=r"hussein2008.yaml exists with other content$"):
         copy_examples(tmp_path / "ex")
     assert cli.main(["examples", "--copy", str(tmp_path / "ex")]) == 2
     assert cli.main(["examples", "--copy", str(tmp_path / "ex"), "--force"]) == 0
+    # only the changed file is written again
+    assert f"1 example file written to {tmp_path / 'ex'}/ ({len(EXAMPLES) - 1} already there, unchanged)" in (
+        capsys.readouterr().out
+    )
 
 
 def test_a_shipped_name_resolves_unless_a_file_of_that_name_exists(tmp_path, monkeypatch):

@@ -28,7 +28,7 @@ def _files(tmp_path, **replan):
 
 
 @pytest.mark.slow
-def test_replan_file_writes_summary_result_and_figure(tmp_path) -> None:
+def test_replan_file_writes_summary_result_and_figure(tmp_path, capsys) -> None:
     out = tmp_path / "out"
     assert cli.main(["replay", str(_files(tmp_path)), "--out", str(out)]) == 0
     s = json.loads((out / "summary.json").read_text())
@@ -36,6 +36,11 @@ def test_replan_file_writes_summary_result_and_figure(tmp_path) -> None:
         assert set(s[name]) == {"cost_mean", "cost_std", "cost_stderr"}
     assert s["replan_every_s"] == 2.5 and s["replan_solve_time_s"]["max"] > 0
     assert {"result.nc", "replan.png"} <= set(s["files"])
+    printed = capsys.readouterr().out  # the terminal gives the three policies' costs as summary.json has them
+    closed, open_ = s["closed_loop"], s["open_loop"]
+    assert f"closed loop {closed['cost_mean']:.6g} ± {closed['cost_stderr']:.2g}" in printed
+    assert f"open loop {open_['cost_mean']:.6g} ± {open_['cost_stderr']:.2g}" in printed
+    assert f"results in {out}/" in printed
 
 
 @pytest.mark.slow

@@ -177,3 +177,11 @@ def test_invalid_scenarios_exit_2_with_the_key_path_and_write_nothing(
     err = capsys.readouterr().err
     assert expected in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def test_animate_is_refused_for_a_replay_that_is_not_a_field_replay(tmp_path, capsys):
+    # a plan replay has nothing to animate: the option is an error (exit 2, nothing written), not ignored
+    out = tmp_path / "out"
+    assert main(["replay", "replay_hussein2008", "--animate", "--out", str(out)]) == 2
+    assert "--animate: only a field replay is animated, this is a plan_replay file" in capsys.readouterr().err
+    assert not out.exists()

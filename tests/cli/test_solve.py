@@ -171,11 +171,14 @@ def test_solver_failure_keeps_results_and_names_the_constraint(tmp_path, capsys)
     data = hussein2008(max_iterations=3, collocation={"intervals": 30})
     path = write(tmp_path, data)
     out = tmp_path / "out"
-    code, _, stderr = run_cli(["solve", path, "--out", out, "--no-plot"], capsys)
+    code, stdout, stderr = run_cli(["solve", path, "--out", out, "--no-plot"], capsys)
     assert code == 1
     assert "Maximum_Iterations_Exceeded" in stderr and "worst-violated constraint" in stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "failed"
+    # the table names the plan it holds (of the last ε solved), not "J (ε = 1)", and quotes no improvement
+    assert f"J of the plan held (ε = {summary['eps_reached']:g})" in stdout and "J (ε = 1)" not in stdout
+    assert "none quoted: the solve did not reach ε = 1" in stdout
     assert summary["homotopy"][-1]["status"] == "Maximum_Iterations_Exceeded"
     worst = summary["worst_violation"]
     assert worst["constraint"].startswith(("dynamics of", "continuity of", "initial value of", "terminal"))

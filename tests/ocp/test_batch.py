@@ -89,6 +89,8 @@ def test_grid_sweep_equals_single_solves_and_resumes(sweep_file, tmp_path, capsy
         assert solution.cost == row["cost"] and solution.problem.digest() == row["task"]
     with pytest.raises(ConfigError, match="several tasks of a sweep"):
         Solution.load(out / rows["solution_file"][0])
+    with pytest.raises(ConfigError, match=r"task: expected the task's sweep index, an integer .* got '"):
+        Solution.load(out / rows["solution_file"][0], task=rows["task"][0])  # the hash column, not the index
     # mobisense replay reads a task of a sweep (solution: OUT/tasks/part-….nc, task: INDEX)
     first = rows.iloc[0]
     replayed, note, solved_here = load_checked(out / first["solution_file"], None, task=int(first["index"]))

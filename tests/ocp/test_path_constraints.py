@@ -81,6 +81,7 @@ def test_a_disc_across_the_path_is_skirted_tangentially_and_costs_more() -> None
     assert solution.success
     report = solution.stats["constraints"]["keep_out[0]"]
     assert report["active"] and report["max_multiplier"] > 0
+    assert report["units"] == solution.problem.units.system().of(length=1)  # as solution.nc's p (UDUNITS)
     dist = np.linalg.norm(solution.p[:, 0] - mid, axis=1)
     # at the nodes the constraint holds to Ipopt's tolerance (1e-9 on scaled rows of size L²·1e-9)
     assert dist.min() >= radius - 1e-6
