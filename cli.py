@@ -15,6 +15,7 @@ program ended by SIGPIPE).
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import os
 import signal
@@ -78,6 +79,8 @@ def build_parser(commands: Sequence[str] | None = None) -> argparse.ArgumentPars
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (also used by ``python -m``/console script)."""
     said: list[str] = []
+    if sys.stdout is None:  # started with its standard output closed (>&-): what it prints is discarded
+        sys.stdout = open(os.devnull, "w")  # noqa: SIM115  (for the life of the process)
     try:
         status = _main(argv, said)
         sys.stdout.flush()  # a closed pipe is met here, not at interpreter exit
@@ -89,6 +92,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # stdout closed by the reader (``mobisense examples | head -1``): end quietly
         _discard_stdout()
         return 128 + signal.SIGPIPE
+    except OSError as err:  # standard output on a full disk (>/dev/full): its data is lost, the files are not
+        _discard_stdout()
+        _say(f"error: cannot write to standard output ({err.strerror or err}); files already written are complete")
+        return 1
 
 
 def _main(argv: Sequence[str] | None, said: list[str]) -> int:
@@ -149,6 +156,10 @@ def _report(err: Exception) -> int:
     if isinstance(err, (ComputationError, OutputError)):
         _say(f"error: {one_line(str(err), 600)}")
         return 1
+    if isinstance(err, OSError) and err.errno in _NO_SPACE:  # a file, or standard output (>/dev/full)
+        where = f" {err.filename}" if err.filename else " to standard output or a file"
+        _say(f"error: cannot write{where} ({err.strerror}); files already written are complete")
+        return 1
     if isinstance(err, MemoryError):
         _say("error: out of memory; lower the problem size (or --max-memory, the budget checked before starting)")
         return 1
@@ -157,6 +168,10 @@ def _report(err: Exception) -> int:
     _say(f"internal error: {one_line(f'{type(err).__name__}: {err}', 300)} (a bug: please report it with "
          "the input; MOBISENSE_TRACEBACK=1 shows the traceback)")  # fmt: skip
     return 3
+
+
+#: errors of a write that no input could fix: no space, over quota, a read-only file system, an I/O error
+_NO_SPACE = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EIO)
 
 
 def _main_thread() -> bool:

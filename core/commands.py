@@ -11,6 +11,8 @@ import json
 import sys
 from pathlib import Path
 
+from .output import output_path
+
 __all__ = ["ValidateCommand", "SchemaCommand", "ExamplesCommand"]
 
 
@@ -54,7 +56,9 @@ class SchemaCommand:
         from .kinds import FILE_KINDS
 
         parser.add_argument("kind", choices=sorted(FILE_KINDS), help="which kind of file")
-        parser.add_argument("--out", type=Path, default=None, help="write the schema to this file (default: stdout)")
+        parser.add_argument(
+            "--out", type=output_path, default=None, help="write the schema to this file (default: stdout)"
+        )
 
     @staticmethod
     def run(args: argparse.Namespace) -> int:
@@ -83,7 +87,9 @@ class ExamplesCommand:
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser) -> None:
         """Add the ``examples`` arguments."""
-        parser.add_argument("--copy", type=Path, default=None, metavar="DIR", help="write every example into DIR")
+        parser.add_argument(
+            "--copy", type=output_path, default=None, metavar="DIR", help="write every example into DIR"
+        )
         parser.add_argument("--force", action="store_true", help="with --copy: overwrite files that differ")
 
     @staticmethod

@@ -15,9 +15,16 @@ import re
 from pathlib import Path
 from types import TracebackType
 
-from .errors import ConfigError
+from .errors import ConfigError, OutputError
 
-__all__ = ["DEFAULT_OUTPUT_ROOT", "LOCK_NAME", "OutputFolder", "default_output_folder", "remove_stale_temporaries"]
+__all__ = [
+    "DEFAULT_OUTPUT_ROOT",
+    "LOCK_NAME",
+    "OutputFolder",
+    "default_output_folder",
+    "output_path",
+    "remove_stale_temporaries",
+]
 
 #: folder under which every command writes by default (relative to the current directory)
 DEFAULT_OUTPUT_ROOT = Path("out")
@@ -28,6 +35,15 @@ TEMPORARY = re.compile(r"^\..+\.[a-z0-9_]{8}\.tmp$")
 #: file systems nothing is written to
 _VIRTUAL_FS = {"proc", "sysfs", "devtmpfs", "devpts", "cgroup", "cgroup2", "debugfs", "securityfs", "tracefs",
                "configfs", "fusectl", "pstore", "bpf", "mqueue", "hugetlbfs", "autofs", "binfmt_misc"}  # fmt: skip
+
+
+def output_path(text: str) -> Path:
+    """``argparse`` type of ``--out`` and ``--copy``: a path, never the empty string (which would mean ``.``)."""
+    if not text.strip():
+        import argparse
+
+        raise argparse.ArgumentTypeError(f"expected a path, got {text!r} (write . for the current folder)")
+    return Path(text)
 
 
 def default_output_folder(input_file: Path) -> Path:
@@ -183,8 +199,23 @@ class OutputFolder:
                 pass
             os.close(self._fd)
             self._fd = None
-        if value is not None:
-            self._undo_create()  # failed before writing anything (invalid input found late): leave nothing behind
+        # a folder this run created and left empty (invalid input found late, a simulation that diverged before
+        # writing): removed, so that nothing is left behind
+        self._undo_create()
+
+    def remove_previous(self, names: list[str]) -> None:
+        """Delete the files ``names`` (in the folder) that an earlier run wrote and this run replaces.
+
+        Called after the computation, before the new files are written: an earlier run's figures are not left
+        beside a new solution (a re-run with ``--no-plot``, or one interrupted while drawing).
+        """
+        for name in names:
+            try:
+                (self.path / name).unlink()
+            except FileNotFoundError:
+                pass
+            except OSError as exc:
+                raise OutputError(f"{self.path / name}: cannot remove this earlier output ({exc.strerror})") from None
 
     def _create(self) -> None:
         missing = []

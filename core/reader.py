@@ -25,7 +25,9 @@ import codecs
 import json
 import os
 import re
+import select
 import stat
+import time
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +46,7 @@ try:  # libyaml's event parser (the composer below stays in Python to count node
 except ImportError:  # pragma: no cover - pure-Python PyYAML
     _C_EVENTS = False
 
-__all__ = ["MAX_BYTES", "MAX_NODES", "MAX_DEPTH", "read_document", "parse_document", "read_bytes"]
+__all__ = ["MAX_BYTES", "MAX_NODES", "MAX_DEPTH", "PIPE_TIMEOUT", "read_document", "parse_document", "read_bytes"]
 
 #: largest input file read (bytes); a problem with 150 states is ~0.5 MB
 MAX_BYTES = 8 * 1024 * 1024
@@ -52,6 +54,8 @@ MAX_BYTES = 8 * 1024 * 1024
 MAX_NODES = 250_000
 #: deepest nesting of lists and mappings, aliases expanded (the schemas need < 10)
 MAX_DEPTH = 64
+#: longest wait (s) for a pipe or device given as an input file to deliver all its data
+PIPE_TIMEOUT = 10.0
 _INT64 = 2**63 - 1
 
 _BOMS = (  # longest first: the UTF-32-LE BOM starts with the UTF-16-LE one
@@ -115,10 +119,20 @@ def read_bytes(path: str | Path, limit: int = MAX_BYTES, what: str = "file") -> 
                 f"{path}: {info.st_size / 2**20:.1f} MiB is larger than the {limit / 2**20:g} MiB an input {what} "
                 "may have"
             )
-        os.set_blocking(fd, True)
+        regular = stat.S_ISREG(info.st_mode)
+        os.set_blocking(fd, regular)  # a pipe or device is read without blocking, each wait bounded below
+        deadline = time.monotonic() + PIPE_TIMEOUT
         chunks, size = [], 0
         while size <= limit:
-            chunk = os.read(fd, min(1 << 20, limit + 1 - size))
+            try:
+                chunk = os.read(fd, min(1 << 20, limit + 1 - size))
+            except BlockingIOError:  # a writer that has sent nothing yet, or not everything
+                if not select.select([fd], [], [], max(0.0, deadline - time.monotonic()))[0]:
+                    raise ConfigError(
+                        f"{path}: no end of the data within {PIPE_TIMEOUT:g} s (a pipe or device whose writer "
+                        "does not finish); expected a file"
+                    ) from None
+                continue
             if not chunk:
                 break
             chunks.append(chunk)
@@ -399,27 +413,43 @@ def _load_json(text: str) -> Any:
             raise _DocumentError(f"number {brief(text, 30)} is out of the floating-point range")
         return value
 
+    def integer(text: str) -> int | _OutOfRange:
+        # as YAML: 64-bit integers; the digits are counted before int() (Python refuses > 4300 digits with a
+        # ValueError); an out-of-range one is a marker, reported with its key path by the walk below
+        if len(text.lstrip("-")) > 20 or abs(value := int(text)) > _INT64:
+            return _OutOfRange(text)
+        return value
+
     try:
-        data = json.loads(text, object_pairs_hook=pairs, parse_constant=constant, parse_float=number)
+        data = json.loads(text, object_pairs_hook=pairs, parse_constant=constant, parse_float=number,
+                          parse_int=integer)  # fmt: skip
     except json.JSONDecodeError as exc:
         raise _DocumentError(f"invalid JSON: {exc.msg}", (), _JsonMark(exc.lineno - 1, exc.colno - 1)) from None
     except RecursionError:
         raise _DocumentError(f"nested more than {MAX_DEPTH} levels deep") from None
-    nodes, stack = 0, [(data, 1)]
+    nodes, stack = 0, [(data, ())]
     while stack:  # JSON has no aliases: count what was parsed
-        value, depth = stack.pop()
+        value, path = stack.pop()
         nodes += 1
-        if depth > MAX_DEPTH or nodes > MAX_NODES:
-            problem = (
-                f"nested more than {MAX_DEPTH} levels deep" if depth > MAX_DEPTH else f"more than {MAX_NODES} values"
-            )
-            raise _DocumentError(problem)
+        if len(path) >= MAX_DEPTH or nodes > MAX_NODES:
+            deep = len(path) >= MAX_DEPTH
+            raise _DocumentError(f"nested more than {MAX_DEPTH} levels deep" if deep else f"more than {MAX_NODES} "
+                                 "values")  # fmt: skip
+        if isinstance(value, _OutOfRange):
+            raise _DocumentError(f"integer {brief(value.text, 30)} is out of range (at most {_INT64})", path)
         if isinstance(value, dict):
-            stack.extend((v, depth + 1) for v in value.values())
+            stack.extend((v, (*path, k)) for k, v in value.items())
             nodes += len(value)
         elif isinstance(value, list):
-            stack.extend((v, depth + 1) for v in value)
+            stack.extend((v, (*path, i)) for i, v in enumerate(value))
     return data
+
+
+class _OutOfRange:
+    """A JSON integer literal outside the 64-bit range (reported with its key path after parsing)."""
+
+    def __init__(self, text: str) -> None:
+        self.text = text
 
 
 class _JsonMark:

@@ -11,6 +11,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..core.output import output_path
+
 __all__ = ["SteadyStateCommand", "check_formation"]
 
 
@@ -23,7 +25,7 @@ class SteadyStateCommand:
         from ..core.budget import add_budget_argument
 
         parser.add_argument("formation", type=Path, help="formation YAML file, or a shipped example's name")
-        parser.add_argument("--out", type=Path, default=None, help="output folder (default out/<file name>)")
+        parser.add_argument("--out", type=output_path, default=None, help="output folder (default out/<file name>)")
         parser.add_argument("--no-plot", action="store_true", help="skip the contour plot")
         add_budget_argument(parser)
 

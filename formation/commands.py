@@ -39,6 +39,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from ..core.output import output_path
+
 __all__ = ["ReplayCommand", "SimulateCommand", "SIMULATION_KINDS", "check_scenario"]
 
 #: ``mobisense simulate KIND`` -> scenario kind of :mod:`mobisense.formation.scenarios`
@@ -56,7 +58,7 @@ class ReplayCommand:
         parser.add_argument(
             "scenario", type=Path, help="scenario YAML file (see problems/replay_*.yaml) or a shipped example's name"
         )
-        parser.add_argument("--out", type=Path, default=None, help="output folder (default out/<file name>)")
+        parser.add_argument("--out", type=output_path, default=None, help="output folder (default out/<file name>)")
         parser.add_argument("--seed", type=_seed, default=None, help="override the scenario's random seed")
         parser.add_argument("--no-plot", action="store_true", help="skip the figures")
         parser.add_argument(
@@ -83,7 +85,7 @@ class SimulateCommand:
 
         parser.add_argument("kind", choices=sorted(SIMULATION_KINDS), help="which simulation")
         parser.add_argument("scenario", type=Path, help="scenario YAML file, or a shipped example's name")
-        parser.add_argument("--out", type=Path, default=None, help="output folder (default out/<file name>)")
+        parser.add_argument("--out", type=output_path, default=None, help="output folder (default out/<file name>)")
         parser.add_argument("--no-plot", action="store_true", help="skip the figures")
         parser.add_argument("--seed", type=_seed, default=None, help="override the scenario's random seed")
         add_budget_argument(parser)

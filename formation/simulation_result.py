@@ -69,12 +69,23 @@ class SimulationResult:
     def save(self, folder: str | Path, figures: bool = True) -> list[Path]:
         """Write ``result.nc``, the figures (unless ``figures=False``) and ``summary.json`` into ``folder``.
 
-        Every file is written atomically; ``summary.json`` last, listing the files written.
+        Every file is written atomically; ``summary.json`` last, listing the files written. The files an earlier
+        run listed in ``summary.json`` (its figures, an animation) are removed first, so that none of them is
+        left beside the new results.
         """
+        from ..core.errors import ConfigError
         from ..core.files import write_json, write_netcdf
+        from ..core.reader import read_document
 
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
+        try:
+            earlier = read_document(folder / "summary.json").get("files", [])
+        except (ConfigError, AttributeError):  # no earlier run here, or not a summary of one
+            earlier = []
+        for name in earlier if isinstance(earlier, list) else []:
+            if isinstance(name, str) and name == Path(name).name and name.endswith((".png", ".mp4", ".gif")):
+                (folder / name).unlink(missing_ok=True)
         write_netcdf(folder / "result.nc", self.dataset)
         written = [folder / "result.nc", folder / "summary.json"]
         written += self.extra_files(folder)

@@ -14,6 +14,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from ..core.output import output_path
+
 __all__ = ["SolveCommand", "SweepCommand", "apply_overrides", "check_problem", "check_sweep"]
 
 
@@ -30,7 +32,7 @@ class SolveCommand:
         parser.add_argument(
             "problem", type=Path, help="problem YAML file, or the name of a shipped example (mobisense examples)"
         )
-        parser.add_argument("--out", type=Path, default=None, help="output folder (default: out/<file name>)")
+        parser.add_argument("--out", type=output_path, default=None, help="output folder (default: out/<file name>)")
         parser.add_argument("--method", choices=METHODS.names(), default=None, help="override solver.method")
         parser.add_argument("--intervals", type=int, default=None, help="override solver.collocation.intervals")
         parser.add_argument("--degree", type=int, default=None, help="override solver.collocation.degree")
@@ -145,6 +147,10 @@ def _solve(args: argparse.Namespace, figures: Any) -> int:
                 from .direct.transcription import transcription_for
 
                 solution.stats["sensitivities"] = solution_sensitivities(transcription_for(problem), solution)
+        from .plots import figure_names
+
+        # an earlier run's figures in this folder would describe another solution: removed, the new ones drawn
+        folder.remove_previous([f"{name}.png" for name in {*figure_names(True), *figure_names(False)}])
         if figures is not None:
             figures.send(solution, out, args.plot)  # drawn by the workers while solution.nc is written
         solution.save(out)
@@ -230,12 +236,12 @@ def _count(number: int, noun: str) -> str:
 
 def check_sweep(data: dict[str, Any], path: Path, kind: str = "sweep") -> str:
     """Validate a sweep file, its base problem and every task it expands to; one line saying what it is."""
-    from .batch.sweep import expand_sweep, load_sweep
+    from .batch.sweep import iter_tasks, load_sweep
 
     spec, base = load_sweep(path)
-    tasks = expand_sweep(spec, base, source=str(path))
+    count = sum(1 for _ in iter_tasks(spec, base, source=str(path)))  # one validated task in memory at a time
     sizes = " x ".join(f"{key} ({len(values)} values)" for key, values in spec.vary.items())
-    return f"parameter sweep ({spec.mode}) of {len(tasks)} tasks over {sizes}, base problem {base.name!r}"
+    return f"parameter sweep ({spec.mode}) of {count} tasks over {sizes}, base problem {base.name!r}"
 
 
 class SweepCommand:
@@ -248,7 +254,7 @@ class SweepCommand:
         from .batch.cluster import add_cluster_arguments
 
         parser.add_argument("sweep", type=Path, help="sweep YAML file (base problem, mode, vary) or a shipped example")
-        parser.add_argument("--out", type=Path, default=None, help="output folder (default out/<file name>)")
+        parser.add_argument("--out", type=output_path, default=None, help="output folder (default out/<file name>)")
         add_cluster_arguments(parser, "the tasks")
         parser.add_argument("--no-warm-start", action="store_true", help="solve every task from the coasting guess")
         parser.add_argument(

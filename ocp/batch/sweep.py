@@ -20,6 +20,7 @@ import hashlib
 import itertools
 import json
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
@@ -42,6 +43,7 @@ __all__ = [
     "SweepTask",
     "load_sweep",
     "expand_sweep",
+    "iter_tasks",
     "task_count",
     "sweep_estimates",
     "sweep_digest",
@@ -70,6 +72,8 @@ class SweepSpec(StrictModel):
                 raise ValueError(f"{key}: {exc}") from None
             if len(values) == 0:
                 raise ValueError(f"{key}: expected at least one value")
+            if key.strip() == "name":  # expand_sweep names each task after the base problem and its index
+                raise ValueError(f"{key}: the tasks are named by the sweep (base name and index); vary another key")
         return vary
 
 
@@ -108,7 +112,9 @@ def load_sweep(path: str | Path) -> tuple[SweepSpec, Problem]:
     """Read a sweep file and its base problem (relative to the sweep file)."""
     spec = load_as(path, "sweep")
     base_path = Path(path).parent / spec.base
-    if not base_path.is_file():
+    if base_path.is_dir():
+        raise ConfigError(f"{path}: base: {base_path} is a directory, expected the base problem file")
+    if not base_path.exists():
         raise ConfigError(f"{path}: base: file not found: {base_path}")
     return spec, load_problem(base_path)
 
@@ -153,6 +159,17 @@ def sweep_estimates(spec: SweepSpec, base: Problem, local_workers: int, source: 
 
 def expand_sweep(spec: SweepSpec, base: Problem, source: str = "<sweep>") -> list[SweepTask]:
     """All tasks of the sweep, each validated; raises :class:`ConfigError` naming the offending key."""
+    tasks = list(iter_tasks(spec, base, source))
+    coords = value_coordinates([t.values for t in tasks])
+    return [replace(t, coords=c) for t, c in zip(tasks, coords, strict=True)]
+
+
+def iter_tasks(spec: SweepSpec, base: Problem, source: str = "<sweep>") -> Iterator[SweepTask]:
+    """The tasks of the sweep one at a time, each validated (without ``coords``): what :func:`expand_sweep` lists.
+
+    ``mobisense validate`` counts them this way, so that validating a sweep of :data:`MAX_TASKS` tasks holds
+    one task in memory at a time, not all of them. Raises :class:`ConfigError` naming the offending key.
+    """
     task_count(spec, source)
     data = base.normalised()
     for key in spec.vary:
@@ -163,7 +180,6 @@ def expand_sweep(spec: SweepSpec, base: Problem, source: str = "<sweep>") -> lis
     keys = list(spec.vary)
     columns = [spec.vary[k] for k in keys]
     combos = zip(*columns, strict=True) if spec.mode == "zip" else itertools.product(*columns)
-    tasks = []
     for index, combo in enumerate(combos):
         values = dict(zip(keys, combo, strict=True))
         # shares all but the varied values with ``data``: only validated, never changed
@@ -176,9 +192,7 @@ def expand_sweep(spec: SweepSpec, base: Problem, source: str = "<sweep>") -> lis
             raise ConfigError(f"{source}: vary (task {index}: {{{shown}}}): {detail}") from None
         structure = (Structure.of(problem), problem.solver.collocation.model_dump_json())
         normalised = problem.normalised()
-        tasks.append(SweepTask(problem_digest(normalised), index, values, normalised, structure, model=problem))
-    coords = value_coordinates([t.values for t in tasks])
-    return [replace(t, coords=c) for t, c in zip(tasks, coords, strict=True)]
+        yield SweepTask(problem_digest(normalised), index, values, normalised, structure, model=problem)
 
 
 def sweep_digest(tasks: list[SweepTask]) -> str:

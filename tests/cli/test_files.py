@@ -229,3 +229,12 @@ def test_the_readme_describes_every_shipped_example_in_one_line():
     readme = (PROBLEMS.parent / "README.md").read_text(encoding="utf-8")
     for example in EXAMPLES:
         assert re.search(rf"^\| `{example.name}\.yaml` \| `{example.command}` \| \S", readme, flags=re.M), example.name
+
+
+@pytest.mark.parametrize("command", [["solve", "hussein2008", "--out"], ["examples", "--copy"],
+                                     ["schema", "problem", "--out"]], ids=lambda c: c[0])  # fmt: skip
+def test_an_empty_output_path_is_refused_not_taken_as_the_current_folder(command, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert cli.main([*command, ""]) == 2
+    assert "expected a path, got ''" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []

@@ -210,3 +210,16 @@ def test_plot_names_are_checked_before_solving(tmp_path, capsys, option, expecte
     code, _, stderr = run_cli(["solve", PROBLEMS / "hussein2008.yaml", "--out", out, *option], capsys)
     assert code == 2 and expected in stderr and stderr.count("\n") == 1
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_a_rerun_into_the_same_folder_leaves_no_earlier_figure(tmp_path, capsys):
+    # the figures of an earlier run describe another solution: a re-run with --no-plot (or one interrupted while
+    # drawing) must not leave them beside the new solution.nc
+    out = tmp_path / "out"
+    args = ["solve", PROBLEMS / "hussein2008.yaml", "--out", out, "--intervals", "20", "--quiet"]
+    assert run_cli([*args, "--plot", "homotopy"], capsys)[0] == 0
+    assert (out / "homotopy.png").is_file()
+    (out / "notes.txt").write_text("the user's own file")
+    assert run_cli([*args, "--no-plot"], capsys)[0] == 0
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "solution.nc", "summary.json"]

@@ -72,6 +72,7 @@ def test_lock_is_exclusive_cleans_temporaries_and_leaves_nothing_on_invalid_inpu
         with pytest.raises(ConfigError, match=f"in use by another mobisense run \\(pid {os.getpid()}\\)"):
             with OutputFolder.check(out).lock():
                 pass
+        (out / "result.nc").write_text("written")
     assert not (out / LOCK_NAME).exists()
     (out / ".summary.json.abcd1234.tmp").write_text("half")
     (out / ".keep.tmp").write_text("not ours")
@@ -82,6 +83,15 @@ def test_lock_is_exclusive_cleans_temporaries_and_leaves_nothing_on_invalid_inpu
         with OutputFolder.check(fresh).lock():
             raise ConfigError("found late")
     assert not (tmp_path / "fresh").exists()
+    # a run that ends without writing (a simulation that diverged: exit 1) leaves no folder it created …
+    with OutputFolder.check(fresh).lock():
+        pass
+    assert not (tmp_path / "fresh").exists()
+    # … and a folder that was there before stays, empty or not
+    fresh.mkdir(parents=True)
+    with OutputFolder.check(fresh).lock():
+        pass
+    assert fresh.is_dir()
 
 
 def test_default_output_folder_is_sanitised():

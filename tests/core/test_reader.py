@@ -111,6 +111,46 @@ def test_json_inputs(tmp_path):
     path.write_text("[" * 100_000)
     with pytest.raises(ConfigError, match="nested|invalid JSON"):
         read_document(path)
+    # integers as in YAML (64 bits), with their key path; 5000 digits would make int() itself raise
+    path.write_text('{"cost": {"alpha": [1, -99999999999999999999]}, "name": 1' + "0" * 5000 + "}")
+    with pytest.raises(ConfigError, match=r"summary.json: (cost.alpha\[1\]|name): integer .* is out of range"):
+        read_document(path)
+    path.write_text('{"a": [9223372036854775807, -9223372036854775807]}')
+    assert read_document(path) == {"a": [2**63 - 1, -(2**63 - 1)]}
+
+
+def test_a_pipe_whose_writer_never_finishes_is_refused_in_bounded_time(tmp_path, monkeypatch):
+    import os
+    import threading
+
+    import mobisense.core.reader as reader
+
+    monkeypatch.setattr(reader, "PIPE_TIMEOUT", 0.3)
+    fifo = tmp_path / "f.yaml"
+    os.mkfifo(fifo)
+    opened = threading.Event()
+
+    def idle_writer() -> None:  # opens the pipe, writes a little, then neither writes nor closes for 2 s
+        with open(fifo, "w") as f:
+            f.write("name: x\n")
+            f.flush()
+            opened.set()
+            time.sleep(2.0)
+
+    thread = threading.Thread(target=idle_writer, daemon=True)
+    thread.start()
+    # a first reader lets the writer's open() return, so the pipe has a writer when read_document opens it
+    # (a pipe without a writer reads as empty, another case)
+    keep = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)
+    try:
+        assert opened.wait(5.0)
+        t0 = time.monotonic()
+        with pytest.raises(ConfigError, match=r"f.yaml: no end of the data within 0.3 s"):
+            read_document(fifo)
+        assert time.monotonic() - t0 < 1.5  # not the writer's 2 s
+    finally:
+        os.close(keep)
+    thread.join()
 
 
 class Inner(StrictModel):

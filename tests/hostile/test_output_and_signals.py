@@ -255,3 +255,23 @@ def test_sweep_killed_then_rerun(tmp_path):
     assert outcome.verdict in GOOD, outcome.problems
     table = pd.read_parquet(out / "results.parquet")
     assert len(table) == 12 and table["task"].is_unique and temporaries(tmp_path) == []
+
+
+@pytest.mark.parametrize("command", [["examples"], ["schema", "problem"], ["validate", "hussein2008"]],
+                         ids=" ".join)  # fmt: skip
+def test_closed_or_full_standard_output(tmp_path, command):
+    import shlex
+    import sys
+
+    environment = {k: v for k, v in os.environ.items() if k != "MOBISENSE_TRACEBACK"}
+    line = " ".join(shlex.quote(a) for a in [sys.executable, "-m", "mobisense.cli", *command])
+    # closed (>&-): what it prints is discarded, no traceback, success
+    closed = subprocess.run(["sh", "-c", f"exec {line} >&-"], cwd=tmp_path, capture_output=True, text=True,
+                            env=environment, timeout=60)  # fmt: skip
+    assert closed.returncode == 0 and closed.stderr == "", closed.stderr
+    # a full disk (/dev/full): one line, exit 1 (an output that could not be written), no internal error
+    with open("/dev/full", "w") as full:
+        done = subprocess.run([sys.executable, "-m", "mobisense.cli", *command], cwd=tmp_path, stdout=full,
+                              stderr=subprocess.PIPE, text=True, env=environment, timeout=60)  # fmt: skip
+    assert done.returncode == 1, done.stderr
+    assert done.stderr.count("\n") == 1 and "No space left on device" in done.stderr and "Traceback" not in done.stderr

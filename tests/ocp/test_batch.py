@@ -54,6 +54,30 @@ def test_key_paths():
         parse_key_path("cost..alpha")
 
 
+def test_sweep_files_refuse_a_varied_name_and_a_base_that_is_a_folder(tmp_path, capsys):
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump(small_base()))
+    (tmp_path / "folder").mkdir()
+    cases = {
+        "name.yaml": ({"base": "base.yaml", "vary": {"name": ["a", "b"]}},
+                      "vary: name: the tasks are named by the sweep (base name and index); vary another key"),
+        "folder.yaml": ({"base": "folder", "vary": {"cost.alpha": [0.1]}},
+                        f"base: {tmp_path / 'folder'} is a directory, expected the base problem file"),
+    }  # fmt: skip
+    for name, (spec, expected) in cases.items():
+        (tmp_path / name).write_text(yaml.safe_dump(spec))
+        assert cli.main(["validate", str(tmp_path / name)]) == 2
+        assert f"{tmp_path / name}: {expected}" in capsys.readouterr().err
+
+
+def test_iter_tasks_is_expand_sweep_one_task_at_a_time():
+    from mobisense.ocp.batch.sweep import iter_tasks
+
+    spec = SweepSpec(base="x", vary={"cost.alpha": ALPHAS, "sensors[0].p0": STARTS})
+    base = Problem.from_dict(small_base())
+    listed, streamed = expand_sweep(spec, base), list(iter_tasks(spec, base))
+    assert [(t.task, t.index, t.values) for t in listed] == [(t.task, t.index, t.values) for t in streamed]
+
+
 def test_zip_mode_needs_equal_lengths():
     spec = SweepSpec(base="x", mode="zip", vary={"cost.alpha": [0.1, 0.2], "horizon.tf": [5.0]})
     with pytest.raises(ValueError, match="equal length"):
