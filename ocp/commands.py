@@ -299,4 +299,13 @@ class SweepCommand:
 
             with numerical_failures(f"plotting {args.sweep}"):
                 save_sweep_figures(result)
-        return 0 if result.summary["counts"]["error"] == 0 else 1
+        counts = result.summary["counts"]
+        unsolved = counts["failed"] + counts["error"]
+        if unsolved:  # like solve: exit 1 when a solve did not converge; every row, and why, is in the results
+            print(
+                f"mobisense: {unsolved} of {counts['tasks']} tasks not solved ({counts['failed']} failed, "
+                f"{counts['error']} errors; their rows give the reason) in {result.folder}",
+                file=sys.stderr,
+            )
+            return 1
+        return 0

@@ -273,3 +273,18 @@ def test_sweep_of_a_field_problem_uses_the_shooting_method(tmp_path):
     for _, row in rows.iterrows():
         base["cost"]["alpha"] = row["cost.alpha"]
         assert row["cost"] == pytest.approx(solve_shooting(Problem.from_dict(base)).cost, rel=1e-12)  # same solve
+
+
+def test_a_sweep_with_a_task_not_solved_exits_1_and_keeps_every_row(tmp_path, capsys):
+    # like solve: exit 1 when a solve did not converge (here: a wall-time limit no solve can meet), the rows kept
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump(small_base()))
+    spec = {"base": "base.yaml", "mode": "grid", "vary": {"solver.time_limit": [1e-9, 1000.0]}}
+    (tmp_path / "sweep.yaml").write_text(yaml.safe_dump(spec))
+    out = tmp_path / "out"
+    assert cli.main(["sweep", str(tmp_path / "sweep.yaml"), "--out", str(out), "--workers", "1", "--quiet",
+                     "--no-plot"]) == 1  # fmt: skip
+    assert f"1 of 2 tasks not solved (1 failed, 0 errors; their rows give the reason) in {out}" in (
+        capsys.readouterr().err
+    )
+    rows = pd.read_parquet(out / "results.parquet").sort_values("index")
+    assert list(rows["status"]) == ["failed", "solved"]
