@@ -59,6 +59,7 @@ class SteadyStateCommand:
                     f"designing {source}: the steady state is not finite (tr P = {s['trace']}): the noise levels "
                     "or bounds make the Riccati equation degenerate"
                 )
+            folder.remove_previous(["trace_contour.png"])  # an earlier run's figure is not left beside new results
             study.save(out, figures=not args.no_plot)
         if s["formation"] == "cross":
             print(f"{s['stationary_point']}: a = {s['a']:.6g}, b = {s['b']:.6g}, tr P = {s['trace']:.6g} -> {out}")
