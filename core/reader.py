@@ -119,8 +119,7 @@ def read_bytes(path: str | Path, limit: int = MAX_BYTES, what: str = "file") -> 
                 f"{path}: {info.st_size / 2**20:.1f} MiB is larger than the {limit / 2**20:g} MiB an input {what} "
                 "may have"
             )
-        regular = stat.S_ISREG(info.st_mode)
-        os.set_blocking(fd, regular)  # a pipe or device is read without blocking, each wait bounded below
+        os.set_blocking(fd, stat.S_ISREG(info.st_mode))  # a pipe or device: read without blocking, waits bounded
         deadline = time.monotonic() + PIPE_TIMEOUT
         chunks, size = [], 0
         while size <= limit:
@@ -128,10 +127,8 @@ def read_bytes(path: str | Path, limit: int = MAX_BYTES, what: str = "file") -> 
                 chunk = os.read(fd, min(1 << 20, limit + 1 - size))
             except BlockingIOError:  # a writer that has sent nothing yet, or not everything
                 if not select.select([fd], [], [], max(0.0, deadline - time.monotonic()))[0]:
-                    raise ConfigError(
-                        f"{path}: no end of the data within {PIPE_TIMEOUT:g} s (a pipe or device whose writer "
-                        "does not finish); expected a file"
-                    ) from None
+                    raise ConfigError(f"{path}: no end of the data within {PIPE_TIMEOUT:g} s (a pipe or device "
+                                      "whose writer does not finish); expected a file") from None  # fmt: skip
                 continue
             if not chunk:
                 break
@@ -414,8 +411,7 @@ def _load_json(text: str) -> Any:
         return value
 
     def integer(text: str) -> int | _OutOfRange:
-        # as YAML: 64-bit integers; the digits are counted before int() (Python refuses > 4300 digits with a
-        # ValueError); an out-of-range one is a marker, reported with its key path by the walk below
+        # as YAML, 64 bits; digits counted before int() (which refuses 4300+); reported with its key path below
         if len(text.lstrip("-")) > 20 or abs(value := int(text)) > _INT64:
             return _OutOfRange(text)
         return value
@@ -432,11 +428,10 @@ def _load_json(text: str) -> Any:
         value, path = stack.pop()
         nodes += 1
         if len(path) >= MAX_DEPTH or nodes > MAX_NODES:
-            deep = len(path) >= MAX_DEPTH
-            raise _DocumentError(f"nested more than {MAX_DEPTH} levels deep" if deep else f"more than {MAX_NODES} "
-                                 "values")  # fmt: skip
+            deep, many = f"nested more than {MAX_DEPTH} levels deep", f"more than {MAX_NODES} values"
+            raise _DocumentError(deep if len(path) >= MAX_DEPTH else many)
         if isinstance(value, _OutOfRange):
-            raise _DocumentError(f"integer {brief(value.text, 30)} is out of range (at most {_INT64})", path)
+            raise _DocumentError(f"integer {brief(str(value), 30)} is out of range (at most {_INT64})", path)
         if isinstance(value, dict):
             stack.extend((v, (*path, k)) for k, v in value.items())
             nodes += len(value)
@@ -445,11 +440,8 @@ def _load_json(text: str) -> Any:
     return data
 
 
-class _OutOfRange:
+class _OutOfRange(str):
     """A JSON integer literal outside the 64-bit range (reported with its key path after parsing)."""
-
-    def __init__(self, text: str) -> None:
-        self.text = text
 
 
 class _JsonMark:
