@@ -83,7 +83,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stdout = open(os.devnull, "w")  # noqa: SIM115  (for the life of the process)
     try:
         status = _main(argv, said)
-        sys.stdout.flush()  # a closed pipe is met here, not at interpreter exit
+        try:
+            sys.stdout.flush()  # a closed pipe is met here, not at interpreter exit
+        except BrokenPipeError:
+            raise
+        except OSError as err:  # standard output on a full disk (>/dev/full): its text is lost, the files are not
+            _discard_stdout()
+            _say(f"error: cannot write to standard output ({err.strerror}); files already written are complete")
+            return 1
         return status
     except KeyboardInterrupt:  # also during the imports, or while an error is being reported
         if not said:
@@ -92,10 +99,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # stdout closed by the reader (``mobisense examples | head -1``): end quietly
         _discard_stdout()
         return 128 + signal.SIGPIPE
-    except OSError as err:  # standard output on a full disk (>/dev/full): its data is lost, the files are not
-        _discard_stdout()
-        _say(f"error: cannot write to standard output ({err.strerror or err}); files already written are complete")
-        return 1
 
 
 def _main(argv: Sequence[str] | None, said: list[str]) -> int:

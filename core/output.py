@@ -127,6 +127,10 @@ class OutputFolder:
         """
         folder = cls(Path(path), option)
         p = folder.path
+        try:
+            os.getcwd()
+        except FileNotFoundError:
+            folder._fail("the current folder no longer exists; change to a folder that does")
         if p.is_symlink() and not p.exists():
             folder._fail(f"is a symbolic link to the missing {os.readlink(p)}; remove it or choose another folder")
         if p.exists() and not p.is_dir():
