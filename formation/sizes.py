@@ -73,9 +73,11 @@ def _distributed(config: Any) -> list[Estimate]:
 
 
 def _reference_problem(
-    source: Path, key: str, solution: Path | None, problem: Path | None
+    source: Path, key: str, solution: Path | None, problem: Path | None, task: int | None = None
 ) -> tuple[Any, list[Estimate]]:
     """The problem of a referenced solution (read from the file, or the problem file it would be solved from).
+
+    ``task`` picks one task of a sweep's ``tasks/part-NNNNNN.nc`` (a plan replay's ``task:``).
 
     ``ConfigError`` names the scenario file and the key (``motion.solution``) before the referenced file's error.
     """
@@ -86,7 +88,7 @@ def _reference_problem(
 
     try:
         if solution is not None and solution.exists():
-            return Solution.read_problem(solution), []
+            return Solution.read_problem(solution, task), []
         if problem is not None and problem.exists():
             p = load_problem(problem)
             return p, problem_estimates(p, method="direct")
@@ -116,7 +118,7 @@ def _plan_replay(config: Any, source: Path) -> list[Estimate]:
     from .replay.plan import resolve
 
     paths = resolve(source, config.solution), resolve(source, config.problem)
-    problem, parts = _reference_problem(source, "solution", *paths)
+    problem, parts = _reference_problem(source, "solution", *paths, config.task)
     if problem is None:
         return parts  # the run reports the missing file (exit 2) before computing anything
     mc = config.monte_carlo

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ..core.errors import ConfigError
+from ..core.errors import ConfigError, brief
 from ..core.files import to_jsonable, write_json, write_netcdf
 from ..core.netcdf_writer import DatasetContent
 from .problem import Problem
@@ -394,13 +394,28 @@ class Solution:
         write_json(folder / "summary.json", self.summary())
 
     @classmethod
-    def from_dataset(cls, ds: Any) -> Solution:
-        """Rebuild a Solution from :meth:`to_dataset` output (or a ``solution.nc`` read back)."""
-        from .solution_dataset import solution_fields
+    def from_dataset(cls, ds: Any, source: str = "solution.nc") -> Solution:
+        """Rebuild a Solution from :meth:`to_dataset` output (or a ``solution.nc`` read back).
 
-        fields = solution_fields(ds)
-        fields["problem"] = Problem.from_dict(fields["problem"], source="solution.nc:problem_yaml")
-        fields["homotopy"] = [HomotopyStep(**step) for step in fields["homotopy"]]
+        ``ConfigError`` naming ``source`` and the variable or attribute when the dataset is not a solution of
+        the problem it stores: dimensions (checked before any value is read), times (finite, strictly
+        increasing, within the horizon), values (a solved solution's are finite); see
+        :func:`~mobisense.ocp.solution_dataset.check_layout` and :func:`~mobisense.ocp.solution_dataset.check_values`.
+        """
+        from .solution_dataset import check_layout, check_times, check_values, solution_fields, stored_problem
+
+        problem = stored_problem(ds, source)
+        check_layout(ds, problem, source)
+        check_times(ds, problem, source)  # before the arrays on those times are read
+        fields = solution_fields(ds, source, problem)
+        check_values(fields, problem, source)
+        try:
+            fields["homotopy"] = [HomotopyStep(**step) for step in fields["homotopy"]]
+        except TypeError:
+            raise ConfigError(
+                f"{source}: homotopy_json: expected a list of steps {{eps, cost, iterations, status, time_s, "
+                f"success, start}}, got {brief(fields['homotopy'])}"
+            ) from None
         return cls(**fields)
 
     @classmethod
@@ -408,17 +423,24 @@ class Solution:
         """Load ``solution.nc`` (or a folder containing it); ``ConfigError`` (one line) if it is not one.
 
         A sweep's ``tasks/part-NNNNNN.nc`` holds several tasks: ``task`` is the sweep index of the one to load
-        (the ``index`` column of ``results.parquet``, whose ``solution_file`` column names the file).
+        (the ``index`` column of ``results.parquet``, whose ``solution_file`` column names the file). The arrays
+        the file declares must fit the memory budget and have the shapes of a solution of its stored problem
+        before any is read (:func:`~mobisense.ocp.solution_file.open_solution_file`, :meth:`from_dataset`).
         """
         with open_solution_file(path, task) as (ds, where):
             try:
-                return cls.from_dataset(ds.load())
-            except ConfigError as exc:
-                raise ConfigError(f"{where}: {str(exc).split(': ', 1)[-1]}") from None
-            except (KeyError, ValueError, TypeError, IndexError, AttributeError, OSError, MemoryError) as exc:
+                return cls.from_dataset(ds, str(where))
+            except ConfigError:
+                raise
+            except (
+                KeyError, ValueError, TypeError, IndexError, AttributeError, OSError, MemoryError, RuntimeError
+            ) as exc:  # fmt: skip
                 raise ConfigError(f"{where}: not a solution written by mobisense solve ({brief_error(exc)})") from None
 
     @staticmethod
-    def read_problem(path: str | Path) -> Problem:
-        """The problem stored in a ``solution.nc`` without loading its arrays (``ConfigError`` if unreadable)."""
-        return read_solution_problem(path)
+    def read_problem(path: str | Path, task: int | None = None) -> Problem:
+        """The problem stored in a ``solution.nc`` without loading its arrays (``ConfigError`` if unreadable).
+
+        ``task`` picks one task of a sweep's ``tasks/part-NNNNNN.nc`` (its sweep index), as in :meth:`load`.
+        """
+        return read_solution_problem(path, task)

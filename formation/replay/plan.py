@@ -301,7 +301,15 @@ def replay_solution(
     """
     import xarray as xr
 
+    from ...core.errors import ConfigError
+
     problem = solution.problem
+    if solution.Sigma is None:  # a field solution written with solver.shooting.full_sigma: false
+        raise ConfigError(
+            f"solution of {problem.name!r}: Sigma: expected the full error covariance Σ(t), which the Monte Carlo "
+            "validation compares against, got a solution written without it (solve it again with "
+            "solver.shooting.full_sigma: true)"
+        )
     t0, tf = problem.horizon.t0, problem.horizon.tf
     mc = scenario.monte_carlo
     steps = max(1, int(round((tf - t0) / mc.time_step)))

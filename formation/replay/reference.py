@@ -31,14 +31,21 @@ __all__ = ["load_checked", "load_or_solve", "reference_status", "ReferenceTrajec
 
 def _read_solution(path: Path, task: int | None = None) -> tuple[Solution | None, str]:
     """The solution in ``path`` (None and why if it cannot be used)."""
+    from ...core.errors import ConfigError
     from ...ocp.solution import Solution
 
     try:
         solution = Solution.load(path, task=task)
+    except ConfigError as err:  # one line naming the file, the variable and what was expected
+        text = str(err)
+        text = text[len(f"{path}: ") :] if text.startswith(f"{path}: ") else text
+        return None, f"{path} is not a solution file written by mobisense solve ({text})"
     except Exception as err:  # noqa: BLE001  (any failure to read means: not a usable solution file)
         return None, f"{path} is not a solution file written by mobisense solve ({type(err).__name__}: {err})"
     if not solution.success:
         return None, f"{path} holds a failed solve ({solution.message})"
+    if solution.Sigma is None:  # the Monte Carlo validation compares against Σ(t)
+        return None, f"{path}: Sigma: expected the full error covariance Σ(t), got a file written without it"
     return solution, ""
 
 
