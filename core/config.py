@@ -347,7 +347,8 @@ def parse_config(data: Any, model: type[T], source: str = "<dict>") -> T:
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: (top level): expected a mapping of keys, got {_KINDS.get(type(data), 'a value')}")
     try:
-        return model.model_validate(data)
+        # the file's name reaches the validators (a field's ``path`` is relative to the file that names it)
+        return model.model_validate(data, context={"source": source})
     except ValidationError as exc:
         errors = exc.errors()
         misspelled = _misspellings(errors, model)

@@ -39,14 +39,14 @@ class SteadyStateCommand:
         from ..core.examples import resolve_input
         from ..core.kinds import load_as
         from ..core.output import OutputFolder, default_output_folder
-        from .cooperative.design_study import design_formation
+        from .cooperative.design_study import design_formation, formation_estimates
 
         args.formation = resolve_input(args.formation)
         source = str(args.formation)
         config = load_as(args.formation, "formation")  # ConfigError -> exit 2, nothing written
         grid = config.contour_resolution**2
-        check_budget([Estimate("the tr P grid", 8.0 * 8 * grid, "a lower contour_resolution", 2e-6 * grid)],
-                     args.max_memory, source, args.max_time)  # fmt: skip
+        estimates = [Estimate("the tr P grid", 8.0 * 8 * grid, "a lower contour_resolution", 2e-6 * grid)]
+        check_budget(estimates + formation_estimates(config), args.max_memory, source, args.max_time)
         folder = OutputFolder.check(args.out if args.out is not None else default_output_folder(args.formation))
         with folder.lock():
             out = folder.path

@@ -8,8 +8,10 @@ Reads a formation file (:class:`FormationFile`), e.g.::
     equal_sides: false
 
 and designs the steady-state shape (:func:`design_formation`): the bounded optimum of the cross's
-(a, b) with its classification, or, with ``formation: custom`` and ``positions: [[x, y], …]``, the
-steady state of that shape by the DARE (no optimisation). The :class:`DesignStudy` it returns writes
+(a, b) with its classification, or, with ``formation: custom`` and ``positions: [[x, y], …]`` (at most
+:data:`~mobisense.estimation.cooperative.steady_state.MAX_POSITIONS` = 5000 platforms: the steady state of N
+platforms factorises an N × N covariance, memory N², time N³), the steady state of that shape by the DARE (no
+optimisation). The :class:`DesignStudy` it returns writes
 ``summary.json`` (``a, b, trace, P_diag, gain, on_bound, stationary_point`` …), ``trace_grid.nc``
 (tr P∞ over the (a, b) box) and ``trace_contour.png``.
 """
@@ -22,10 +24,13 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
+from ...core.budget import Estimate
 from ...core.config import InvalidValue, PositiveFloat, StrictModel, Vector2
+from ...core.errors import brief
 from .noise_config import NoiseConfig
+from .steady_state import MAX_POSITIONS
 
-__all__ = ["FormationFile", "ShapeBounds", "DesignStudy", "design_formation"]
+__all__ = ["FormationFile", "ShapeBounds", "DesignStudy", "design_formation", "formation_estimates"]
 
 
 class ShapeBounds(StrictModel):
@@ -64,10 +69,17 @@ class FormationFile(StrictModel):
         else:
             if self.positions is None:
                 raise InvalidValue("positions", "required for formation: custom (list of [x, y])")
+            if len(self.positions) > MAX_POSITIONS:
+                raise InvalidValue(
+                    "positions", f"expected at most {MAX_POSITIONS} platforms (the steady state of N platforms "
+                    f"needs N × N matrices and N³ operations), got {len(self.positions)}"
+                )  # fmt: skip
             arr = np.asarray(self.positions, dtype=float)
             offsets = arr - arr.mean(axis=0)
             if len(arr) < 3 or np.linalg.matrix_rank(offsets, tol=1e-9 * max(1.0, np.abs(offsets).max())) < 2:
-                raise InvalidValue("positions", f"expected >= 3 platforms not all on one line, got {self.positions}")
+                raise InvalidValue(
+                    "positions", f"expected >= 3 platforms not all on one line, got {brief(self.positions)}"
+                )
         if self.formation == "cross" and self.bounds is not None:
             from .steady_state import cross_information
 
@@ -85,6 +97,21 @@ class FormationFile(StrictModel):
         if not 11 <= self.contour_resolution <= 1001:
             raise InvalidValue("contour_resolution", f"expected 11 … 1001, got {self.contour_resolution}")
         return self
+
+
+def formation_estimates(config: FormationFile) -> list[Estimate]:
+    """Memory and time of designing ``config`` beyond the (a, b) grid, for :func:`~mobisense.core.budget.check_budget`.
+
+    A custom shape of N platforms factorises the N × N covariance ``D U D' + R`` (a few N × N arrays, N³/3
+    flops); the cross's closed form needs nothing of note. Computed from the validated sizes alone.
+    """
+    from .steady_state import steady_state_bytes, steady_state_seconds
+
+    if config.formation != "custom" or config.positions is None:
+        return []
+    n = len(config.positions)
+    what = f"the steady state of {n} platforms (positions: {n} × {n} covariance matrices)"
+    return [Estimate(what, steady_state_bytes(n), "use fewer positions", steady_state_seconds(n))]
 
 
 class DesignStudy:

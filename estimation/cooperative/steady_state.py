@@ -6,10 +6,12 @@ eq. steady_state.1)
 
     P(+)⁻¹ = (P(+) + M)⁻¹ + C' (D U D' + R)⁻¹ C .
 
-* :func:`steady_state` — any formation (N platforms at given offsets): python-control ``dare``; *
-  :func:`cross_steady_state` — the cross (Prop. 3.14) in closed form, numerically; * :func:`cross_trace_function` — the
-  same closed form as a CasADi function of ``(a, b)`` with symbolic noise parameters, differentiated by CasADi
-  (gradient, Hessian) for :mod:`mobisense.estimation.cooperative.formation_design`.
+* :func:`steady_state` — any formation (N ≤ :data:`MAX_POSITIONS` platforms at given offsets): python-control
+  ``dare`` on the 3 × 3 information form;
+* :func:`cross_steady_state` — the cross (Prop. 3.14) in closed form, numerically;
+* :func:`cross_trace_function` — the same closed form as a CasADi function of ``(a, b)`` with symbolic noise
+  parameters, differentiated by CasADi (gradient, Hessian) for
+  :mod:`mobisense.estimation.cooperative.formation_design`.
 
 Each returns or feeds a :class:`SteadyState` with prior and posterior covariances and the constant gain
 ``K∞ = P∞(−) C' (C P∞(−) C' + D U D' + R)⁻¹ = P∞(+) C' (D U D' + R)⁻¹``. (Zhang & Leonard (2010), §III-D,
@@ -31,11 +33,18 @@ from .noise_config import CooperativeNoise
 __all__ = [
     "SteadyState",
     "steady_state",
+    "steady_state_bytes",
+    "steady_state_seconds",
+    "MAX_POSITIONS",
     "cross_steady_state",
     "cross_trace",
     "cross_trace_function",
     "cross_information",
 ]
+
+#: most platforms :func:`steady_state` accepts: its ``D U D' + R`` is N × N (memory N², Cholesky time N³);
+#: 5000 platforms need ~1 GB and a few seconds
+MAX_POSITIONS = 5000
 
 
 @dataclass(frozen=True)
@@ -74,34 +83,98 @@ def steady_state(positions: np.ndarray, noise: CooperativeNoise) -> SteadyState:
     Parameters
     ----------
     positions : ndarray, shape (N, 2)
-        Platform positions (their mean is the centre), N ≥ 3 and not collinear.
+        Platform positions (their mean is the centre), 3 ≤ N ≤ :data:`MAX_POSITIONS` and not collinear.
     noise : CooperativeNoise
 
     Returns
     -------
     SteadyState
 
+    Raises
+    ------
+    ValueError
+        ``positions: …`` for too many, too few or collinear positions (checked before anything of size N² is
+        allocated); ``numpy.linalg.LinAlgError`` (a ``ValueError``) when ``D U D' + R`` is not positive definite.
+    RuntimeError
+        When the Riccati equation has no stabilising solution to working precision: positions so nearly
+        collinear that the information ``C' S⁻¹ C`` is singular to round-off, or positions and noise levels
+        many orders of magnitude apart.
+
     Notes
     -----
-    The filter Riccati equation is the dual of the control one: ``control.dare(A', C', M, DUD' + R)``
-    with ``A = I`` returns the prior ``P∞(−)``; then ``P∞(+) = P∞(−) − P∞(−) C' S⁻¹ C P∞(−)``.
+    The filter Riccati equation is the dual of the control one, ``control.dare(A', C', M, S)`` with ``A = I``
+    and ``S = D U D' + R`` (N × N). Its information form ``P⁻ ↦ (P⁻⁻¹ + J)⁻¹ + M`` depends on the measurements
+    only through the 3 × 3 information ``J = C' S⁻¹ C`` (Woodbury), so the same prior ``P∞(−)`` solves
+    ``control.dare(I, L, M, I_3)`` with ``J = L L'``: a 3 × 3 problem instead of an (N + 6)-dimensional
+    pencil, with exactly symmetric weights. ``S`` is factorised once (Cholesky, N³/3 flops, a few N × N
+    arrays: :func:`steady_state_bytes`); then ``P∞(+) = (P∞(−)⁻¹ + J)⁻¹`` and ``K∞ = P∞(+) (S⁻¹ C)'``.
     """
     import control
+    import scipy.linalg
 
     positions = np.asarray(positions, dtype=float)
+    n = positions.shape[0] if positions.ndim == 2 else 0
+    if positions.ndim != 2 or positions.shape[1] != 2 or not 3 <= n <= MAX_POSITIONS:
+        raise ValueError(
+            f"positions: expected 3 … {MAX_POSITIONS} platforms as [x, y] rows (the steady state costs N² memory "
+            f"and N³ time), got an array of shape {positions.shape}"
+        )
+    if not np.all(np.isfinite(positions)):
+        raise ValueError("positions: expected finite numbers")
     C, D = taylor_matrices(positions)
-    R_total = noise.total_measurement_covariance(D)
     if np.linalg.matrix_rank(C) < 3:
         raise ValueError(
             "positions: collinear formation, the steady state is unbounded (docs/theory/cooperative.md §4, Cd5)"
         )
-    # docs/theory/steady_state.md, eq. steady_state.1 (dual form)
-    prior, _, _ = control.dare(np.eye(3), C.T, noise.process, R_total)
+    R_total = noise.total_measurement_covariance(D)
+    R_total = 0.5 * (R_total + R_total.T)  # D U D' in floating point is symmetric only to round-off
+    if not np.all(np.isfinite(R_total)):
+        raise RuntimeError(
+            "the measurement covariance D U D' + R overflows: the positions and noise levels are too "
+            "far apart in scale (change the units)"
+        )
+    # S⁻¹ C by Cholesky (LinAlgError, a ValueError, if S is not positive definite)
+    whitened = scipy.linalg.solve(R_total, C, assume_a="pos", check_finite=False)
+    del R_total
+    information = C.T @ whitened
+    information = 0.5 * (information + information.T)  # J = C' S⁻¹ C
+    eigenvalues, vectors = np.linalg.eigh(information)
+    if not eigenvalues[0] > 1e-13 * eigenvalues[-1]:  # below, eigh's smallest eigenvalue is round-off
+        raise RuntimeError(
+            "positions: nearly collinear formation, the information C'(DUD' + R)⁻¹C is singular to working "
+            "precision and the steady state unbounded (docs/theory/cooperative.md §4, Cd5)"
+        )
+    root = vectors * np.sqrt(eigenvalues)  # J = L L'
+    process = 0.5 * (noise.process + noise.process.T)
+    # docs/theory/steady_state.md, eq. steady_state.1 (dual, information form)
+    try:
+        prior, _, _ = control.dare(np.eye(3), root, process, np.eye(3))
+    except (control.ControlArgument, ValueError, ArithmeticError) as exc:  # ControlArgument is a TypeError
+        reason = " ".join(str(exc).split()) or type(exc).__name__
+        raise RuntimeError(
+            f"the steady-state Riccati equation has no stabilising solution to working precision ({reason}); "
+            "the positions may be nearly collinear or the noise levels too far apart"
+        ) from exc
     prior = 0.5 * (prior + prior.T)
-    S = C @ prior @ C.T + R_total
-    posterior = prior - prior @ C.T @ np.linalg.solve(S, C @ prior)
+    # P∞(+) = P∞(−) − P∞(−) L (L' P∞(−) L + I)⁻¹ L' P∞(−)  (= (P∞(−)⁻¹ + J)⁻¹)
+    PL = prior @ root
+    posterior = prior - PL @ np.linalg.solve(root.T @ PL + np.eye(3), PL.T)
     posterior = 0.5 * (posterior + posterior.T)
-    return SteadyState(positions, prior, posterior, _gain(posterior, C, R_total))
+    if not (np.all(np.isfinite(prior)) and np.all(np.isfinite(posterior))):
+        raise RuntimeError(
+            "the steady-state covariance is not finite: the noise levels make the Riccati equation degenerate"
+        )
+    return SteadyState(positions, prior, posterior, posterior @ whitened.T)
+
+
+def steady_state_bytes(n_platforms: int) -> float:
+    """Peak memory (bytes) of :func:`steady_state` for ``n_platforms`` positions: ~5 N × N float arrays."""
+    return 5 * 8.0 * float(n_platforms) ** 2
+
+
+def steady_state_seconds(n_platforms: int) -> float:
+    """A low estimate of the time (s) of :func:`steady_state`: forming and factorising ``S`` (N³/3 flops)."""
+    return float(n_platforms) ** 3 / 3 / 2e10 + 8.0 * float(n_platforms) ** 2 / 5e9
 
 
 def cross_information(a: Any, b: Any, sigma_measurement: Any, sigma_hessian: Any) -> tuple[Any, Any, Any]:

@@ -21,11 +21,13 @@ from __future__ import annotations
 import difflib
 import importlib
 import inspect
+import re
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pydantic import ConfigDict, PrivateAttr, model_validator
+from pydantic import ConfigDict, PrivateAttr, ValidationInfo, model_validator
 
 from ...core.config import InvalidValue, StrictModel
 from .base import FIELDS, Field, make_field, register_field
@@ -257,8 +259,27 @@ def load_fields() -> dict[str, type[Field]]:
     return FIELDS
 
 
+def _scenario_folder(info: ValidationInfo) -> Path | None:
+    """The folder of the file being validated: ``context={"source": FILE}`` of ``model_validate``, if a file."""
+    context = info.context if isinstance(info.context, dict) else {}
+    source = context.get("source")
+    try:
+        if isinstance(source, (str, Path)) and str(source) and Path(source).is_file():
+            return Path(source).parent
+    except (OSError, ValueError):  # a name too long, a NUL character: not a file
+        pass
+    return None
+
+
 class FieldSpec(StrictModel):
-    """A field in a YAML file: ``{kind: NAME, <constructor parameters>…}``, validated by constructing it."""
+    """A field in a YAML file: ``{kind: NAME, <constructor parameters>…}``, validated by constructing it.
+
+    Parameters naming files (``path`` of a ``gridded`` field, listed in the field class's ``file_parameters``)
+    are relative to the folder of the file being validated, named by the validation context
+    (``model_validate(data, context={"source": FILE})``); without a source file they are relative to the
+    working directory. Absolute paths are used as they are. An error of a parameter is reported at its key
+    (``field.path: …``).
+    """
 
     model_config = ConfigDict(extra="allow")
 
@@ -266,7 +287,7 @@ class FieldSpec(StrictModel):
     _field: Field | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
-    def _build(self) -> FieldSpec:
+    def _build(self, info: ValidationInfo) -> FieldSpec:
         kinds = load_fields()
         if self.kind not in kinds:
             hint = difflib.get_close_matches(self.kind, list(kinds), n=1)
@@ -284,10 +305,20 @@ class FieldSpec(StrictModel):
                     f"unknown parameter of field {self.kind!r}{f'; did you mean {hint[0]!r}?' if hint else ''} "
                     f"(allowed: {', '.join(allowed)})",
                 )
+        parameters = self.parameters()
+        folder = _scenario_folder(info)
+        for key in getattr(kinds[self.kind], "file_parameters", ()):
+            value = parameters.get(key)
+            if isinstance(value, str) and value and not Path(value).is_absolute():
+                parameters[key] = str(folder / value) if folder is not None else value
         try:
-            self._field = make_field(self.kind, **self.parameters())
+            self._field = make_field(self.kind, **parameters)
         except (TypeError, ValueError) as err:
-            raise InvalidValue(self.kind, str(err)) from None
+            message = str(err)
+            key, _, rest = message.partition(": ")
+            if rest and re.split(r"[.\[]", key, maxsplit=1)[0] in allowed:  # "degree: expected …" → field.degree
+                raise InvalidValue(key, rest) from None
+            raise InvalidValue(self.kind, message) from None
         return self
 
     def parameters(self) -> dict[str, Any]:
