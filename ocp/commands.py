@@ -299,6 +299,8 @@ class SweepCommand:
 
             with numerical_failures(f"plotting {args.sweep}"):
                 save_sweep_figures(result)
+        elif args.no_plot:  # an earlier run's cost.png shows fewer tasks than the results now hold
+            (result.folder / "cost.png").unlink(missing_ok=True)
         counts = result.summary["counts"]
         unsolved = counts["failed"] + counts["error"]
         if unsolved:  # like solve: exit 1 when a solve did not converge; every row, and why, is in the results

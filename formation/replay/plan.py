@@ -21,6 +21,7 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -387,5 +388,23 @@ def replay_solution(
 
 
 def resolve(scenario_path: Path, relative: str | None) -> Path | None:
-    """A path of the scenario file, relative to the scenario's folder."""
-    return None if relative is None else (scenario_path.parent / relative)
+    """A path of the scenario file, relative to the scenario's folder.
+
+    A shipped example run by name (``mobisense replay replay_hussein2008``) lives in the installed package, where
+    its ``solution: ../out/hussein2008/solution.nc`` never is: when that path does not exist, the same path taken
+    as if the example were in ``./problems/`` (where ``mobisense examples --copy problems`` puts it) is used if it
+    exists — ``out/hussein2008/solution.nc``, where ``mobisense solve hussein2008`` writes by default.
+    """
+    if relative is None:
+        return None
+    path = scenario_path.parent / relative
+    if path.exists() or Path(relative).is_absolute():
+        return path
+    from ...core.examples import examples_folder
+
+    try:
+        shipped = scenario_path.resolve().parent == examples_folder().resolve()
+    except OSError:
+        shipped = False
+    mirrored = Path(os.path.normpath(Path("problems") / relative))
+    return mirrored if shipped and mirrored.exists() else path

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -206,3 +207,27 @@ def test_formation_centre_tracks_the_optimised_path(saved_solution, solution, tm
     # the filter on the exact quadratic model (known Ĥ) estimates z within 4σ of its own covariance
     assert np.all(np.abs(ds["z_est"] - ds["z_true"]) < 4 * ds["z_std"] + 1e-12)
     assert QuadraticField  # the field kind used above
+
+
+def test_a_shipped_example_run_by_name_finds_the_solution_solve_wrote_by_default(tmp_path, monkeypatch):
+    # after pip install the example lives in site-packages, where its ../out/hussein2008/solution.nc never is;
+    # `mobisense solve hussein2008` writes out/hussein2008/solution.nc under the current folder: that one is used
+    import mobisense.core.examples as examples
+    from mobisense.formation.replay.plan import resolve
+
+    installed = tmp_path / "site-packages" / "mobisense" / "problems"
+    installed.mkdir(parents=True)
+    scenario = installed / "replay_hussein2008.yaml"
+    scenario.write_text("name: x\n")
+    monkeypatch.setattr(examples, "examples_folder", lambda: installed)
+    user = tmp_path / "user"
+    user.mkdir()
+    monkeypatch.chdir(user)
+    relative = "../out/hussein2008/solution.nc"
+    assert resolve(scenario, relative) == installed / relative  # nothing solved yet: the file's own path
+    (user / "out" / "hussein2008").mkdir(parents=True)
+    (user / "out" / "hussein2008" / "solution.nc").write_bytes(b"")
+    assert resolve(scenario, relative) == Path("out/hussein2008/solution.nc")
+    copied = user / "mine" / "replay_hussein2008.yaml"  # a file of the user's own keeps its own relative path
+    copied.parent.mkdir()
+    assert resolve(copied, relative) == copied.parent / relative

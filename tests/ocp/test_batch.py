@@ -128,6 +128,10 @@ def test_grid_sweep_equals_single_solves_and_resumes(sweep_file, tmp_path, capsy
     assert cli.main(["sweep", str(sweep_file), "--out", str(out), "--workers", "2", "--quiet"]) == 0
     assert json.loads((out / "summary.json").read_text())["counts"]["resumed"] == 9
     assert stamps and stamps == {p: p.stat().st_mtime_ns for p in (out / "tasks").glob("part-*.nc")}
+    # … and with --no-plot it leaves no cost.png of an earlier run (one may show fewer tasks than the rows)
+    assert (out / "cost.png").is_file()
+    assert cli.main(["sweep", str(sweep_file), "--out", str(out), "--workers", "2", "--quiet", "--no-plot"]) == 0
+    assert not (out / "cost.png").exists()
 
 
 def test_interrupted_sweep_resumes_without_recomputing(sweep_file, tmp_path, monkeypatch):
