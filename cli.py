@@ -81,6 +81,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     said: list[str] = []
     if sys.stdout is None:  # started with its standard output closed (>&-): what it prints is discarded
         sys.stdout = open(os.devnull, "w")  # noqa: SIM115  (for the life of the process)
+    if sys.stderr is None:  # the same for messages and progress (2>&-)
+        sys.stderr = open(os.devnull, "w")  # noqa: SIM115
     try:
         status = _main(argv, said)
         try:
@@ -159,6 +161,9 @@ def _report(err: Exception) -> int:
     if isinstance(err, (ComputationError, OutputError)):
         _say(f"error: {one_line(str(err), 600)}")
         return 1
+    if isinstance(err, OSError) and err.errno == errno.ENAMETOOLONG:  # a path given in a file or an option
+        _say(f"error: {one_line(str(err.filename or 'a path'), 100)}: file name too long for this system")
+        return 2
     if isinstance(err, OSError) and err.errno in _NO_SPACE:  # a file, or standard output (>/dev/full)
         where = f" {err.filename}" if err.filename else " to standard output or a file"
         _say(f"error: cannot write{where} ({err.strerror}); files already written are complete")

@@ -114,6 +114,8 @@ def replay_kind(data: Any, source: Path) -> str:
         return "field_replay"
     if isinstance(data, dict) and "solution" in data:
         return "plan_replay"
+    if isinstance(data, dict) and "replan" in data:  # a re-planning file without its kind: key
+        return "replan"
     raise ConfigError(
         f"{source}: (top level): expected a field replay (key 'field') or a replay of an optimised "
         "solution (key 'solution')"

@@ -63,7 +63,7 @@ def open_solution_file(path: str | Path, task: int | None = None) -> Iterator[tu
             f"{shape} ({format_bytes(total)} declared by the file's variables in all)"
         )
     try:
-        ds = xr.open_dataset(path, engine="h5netcdf", decode_timedelta=False, **_lazy_indexes())
+        ds = xr.open_dataset(path, engine="h5netcdf", decode_timedelta=False, phony_dims="access", **_lazy_indexes())
     except (OSError, ValueError, TypeError, KeyError, RuntimeError) as exc:
         raise ConfigError(f"{path}: not a netCDF solution written by mobisense solve ({brief_error(exc)})") from None
     with ds:

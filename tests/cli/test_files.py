@@ -238,3 +238,24 @@ def test_an_empty_output_path_is_refused_not_taken_as_the_current_folder(command
     assert cli.main([*command, ""]) == 2
     assert "expected a path, got ''" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_file_name_too_long_for_the_system_is_an_input_error(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    long = "x" * 300  # over the 255 bytes a name may have: the OS refuses it (ENAMETOOLONG), not a bug
+    assert cli.main(["solve", long]) == 2
+    assert cli.main(["solve", "hussein2008", "--no-plot", "--out", f"{long}/o"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and all(line.endswith("file name too long for this system") for line in err)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_replan_file_without_its_kind_key_is_a_replay(tmp_path):
+    from mobisense import load_scenario
+
+    data = _data("replan_drift")
+    del data["kind"]
+    path = PROBLEMS / "replan_drift.yaml"
+    copy = tmp_path / "replan.yaml"
+    copy.write_text(yaml.safe_dump({**data, "problem": str(path.parent / data["problem"])}))
+    assert load_scenario(copy, kind="replay").kind == "replan" == load_scenario(copy).kind
