@@ -408,7 +408,7 @@ class Solution:
         check_layout(ds, problem, source)
         check_times(ds, problem, source)  # before the arrays on those times are read
         fields = solution_fields(ds, source, problem)
-        check_values(fields, problem, source)
+        check_values(fields, source)
         try:
             fields["homotopy"] = [HomotopyStep(**step) for step in fields["homotopy"]]
         except TypeError:

@@ -162,9 +162,6 @@ DIMENSIONS: dict[str, tuple[str, ...]] = {
 #: variables read together: a file with the first holds all of them
 _GROUPS = (("Lam", "lam_p", "lam_v", "time_costate"), ("path_eps", "path_p", "path_Sigma"),
            ("nlp_w", "nlp_lam_w", "nlp_lam_g", "nlp_P"))  # fmt: skip
-#: the global attributes a Solution reads
-_ATTRIBUTES = ("problem_yaml", "method", "status", "message", "eps", "terminal_cost", "running_cost",
-               "control_energy", "homotopy_json", "baseline_json", "stats_json")  # fmt: skip
 
 
 def _fail(source: str, key: str, expected: str, got: str) -> ConfigError:
@@ -285,36 +282,16 @@ def _variable_of(ds: Any, dim: str) -> str:
 
 
 def check_times(ds: Any, problem: Any, source: str = "solution.nc") -> None:
-    """Read the times only and check them as :func:`check_values` does (before the other arrays are read)."""
-    names = ("time", "time_u", "time_costate")
-    _check_times({name: _values(ds, name) for name in names if name in ds.variables}, problem, source)
+    """Read the times only and check them, before the other arrays are read.
 
-
-def check_values(fields: dict[str, Any], problem: Any, source: str = "solution.nc") -> None:
-    """Check the values :func:`solution_fields` read: times finite, strictly increasing, within the horizon.
-
-    A solved solution's Σ, p, v, u and costs must also be finite and at most
-    :data:`~mobisense.core.config.MAX_MAGNITUDE` in magnitude (a failed solve keeps what it reached, NaN
-    included).
+    Finite, strictly increasing, within the horizon of ``problem``; the state times run from t0 to tf.
     """
-    times = {"time": fields["t"], "time_u": fields["t_u"], "time_costate": fields["t_costate"]}
-    _check_times({name: t for name, t in times.items() if t is not None}, problem, source)
-    if fields["path_eps"] is not None:
-        _finite(fields["path_eps"], "path_eps", source)
-    if fields["status"] != "solved":
-        return
-    for name in ("terminal_cost", "running_cost", "control_energy"):
-        if not abs(fields[name]) <= MAX_MAGNITUDE:
-            raise _fail(source, name, f"a magnitude at most {MAX_MAGNITUDE:g} (status: solved)", f"{fields[name]:g}")
-    for name in ("Sigma", "p", "v", "u"):
-        if fields[name] is not None:
-            _finite(fields[name], name, source, bound=True)
-
-
-def _check_times(times: dict[str, np.ndarray], problem: Any, source: str) -> None:
     t0, tf = problem.horizon.t0, problem.horizon.tf
     tol = 1e-8 * (tf - t0) + 64 * np.finfo(float).eps * max(abs(t0), abs(tf))
-    for name, t in times.items():
+    for name in ("time", "time_u", "time_costate"):
+        if name not in ds.variables:
+            continue
+        t = _values(ds, name)
         _finite(t, name, source)
         steps = np.diff(t)
         if np.any(steps <= 0):
@@ -326,6 +303,25 @@ def _check_times(times: dict[str, np.ndarray], problem: Any, source: str) -> Non
         if name == "time" and (abs(t[0] - t0) > tol or abs(t[-1] - tf) > tol):
             raise _fail(source, name, f"times from t0 = {t0:g} to tf = {tf:g} (the horizon of problem_yaml)",
                         f"[{t[0]:g}, {t[-1]:g}]")  # fmt: skip
+
+
+def check_values(fields: dict[str, Any], source: str = "solution.nc") -> None:
+    """Check the values :func:`solution_fields` read (their times are :func:`check_times`'s).
+
+    ``path_eps`` must be finite; a solved solution's Σ, p, v, u and costs must also be finite and at most
+    :data:`~mobisense.core.config.MAX_MAGNITUDE` in magnitude (a failed solve keeps what it reached, NaN
+    included).
+    """
+    if fields["path_eps"] is not None:
+        _finite(fields["path_eps"], "path_eps", source)
+    if fields["status"] != "solved":
+        return
+    for name in ("terminal_cost", "running_cost", "control_energy"):
+        if not abs(fields[name]) <= MAX_MAGNITUDE:
+            raise _fail(source, name, f"a magnitude at most {MAX_MAGNITUDE:g} (status: solved)", f"{fields[name]:g}")
+    for name in ("Sigma", "p", "v", "u"):
+        if fields[name] is not None:
+            _finite(fields[name], name, source, bound=True)
 
 
 def _finite(values: np.ndarray, name: str, source: str, bound: bool = False) -> None:
