@@ -122,17 +122,15 @@ def copy_examples(folder: str | Path, overwrite: bool = False) -> list[Path]:
 
     folder = Path(folder)
     sources = shipped_examples()
-    clashes = [
-        folder / src.name
-        for src in sources.values()
-        if (folder / src.name).exists() and (folder / src.name).read_bytes() != src.read_bytes()
-    ]
+    there = {name: (folder / src.name).read_bytes() == src.read_bytes() for name, src in sources.items()
+             if (folder / src.name).exists()}  # fmt: skip  (True: the same content)
+    clashes = [folder / sources[name].name for name, same in there.items() if not same]
     if clashes and not overwrite:
         more = f" (and {len(clashes) - 1} more)" if len(clashes) > 1 else ""
         raise FileExistsError(f"{clashes[0]} exists with other content{more}")
     written = []
-    for src in sources.values():
-        if (folder / src.name).is_file() and (folder / src.name).read_bytes() == src.read_bytes():
+    for name, src in sources.items():
+        if there.get(name):
             continue
         with atomic_path(folder / src.name) as tmp:
             tmp.write_bytes(src.read_bytes())

@@ -94,9 +94,11 @@ def scenario_model(kind: str) -> Any:
 
 
 def replay_kind(data: Any, source: Path) -> str:
-    """``field_replay`` or ``plan_replay`` from the ``kind`` or the keys of a replay file; else ``ConfigError``."""
+    """``field_replay``, ``plan_replay`` or ``replan`` from the ``kind`` or the keys of a replay file; else an error.
+
+    Raises ``ConfigError``; a file of another kind has been refused by :func:`mobisense.core.kinds.check_command_kind`.
+    """
     from ..core.config import ConfigError
-    from ..core.kinds import FILE_KINDS
 
     if data is None:
         raise ConfigError(f"{source}: (top level): the file is empty; expected a mapping of keys")
@@ -108,13 +110,11 @@ def replay_kind(data: Any, source: Path) -> str:
     kind = kind if isinstance(kind, str) else None  # a list or mapping is reported by the model
     if kind in REPLAY_KINDS:
         return str(kind)
-    if kind in FILE_KINDS:
-        raise ConfigError(f"{source}: kind: a {kind} file is not a replay: run it with {FILE_KINDS[kind].command}")
-    if isinstance(data, dict) and "field" in data:
+    if "field" in data:
         return "field_replay"
-    if isinstance(data, dict) and "solution" in data:
+    if "solution" in data:
         return "plan_replay"
-    if isinstance(data, dict) and "replan" in data:  # a re-planning file without its kind: key
+    if "replan" in data:  # a re-planning file without its kind: key
         return "replan"
     raise ConfigError(
         f"{source}: (top level): expected a field replay (key 'field') or a replay of an optimised "
