@@ -83,6 +83,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stdout = open(os.devnull, "w")  # noqa: SIM115  (for the life of the process)
     if sys.stderr is None:  # the same for messages and progress (2>&-)
         sys.stderr = open(os.devnull, "w")  # noqa: SIM115
+    stderr = sys.stderr
+    sys.stderr = _Discarding(stderr)  # type: ignore[assignment]
     try:
         status = _main(argv, said)
         try:
@@ -101,6 +103,45 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # stdout closed by the reader (``mobisense examples | head -1``): end quietly
         _discard_stdout()
         return 128 + signal.SIGPIPE
+    finally:
+        sys.stderr = stderr
+
+
+class _Discarding:
+    """Standard error that cannot fail a command: after its first failed write or flush it discards.
+
+    Messages and progress go to standard error; on a full disk (``2>/dev/full``), a reader that went away or an
+    I/O error they are lost, the command's files are not (as with a closed standard error, ``2>&-``).
+    """
+
+    def __init__(self, stream: Any) -> None:
+        self.stream = stream
+
+    def write(self, text: str) -> int:
+        try:
+            return int(self.stream.write(text))
+        except (OSError, ValueError):
+            self.discard()
+            return len(text)
+
+    def flush(self) -> None:
+        try:
+            self.stream.flush()
+        except (OSError, ValueError):
+            self.discard()
+
+    def discard(self) -> None:
+        """Write to /dev/null from now on, and so does the stream's file descriptor (its buffer flushes at exit)."""
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, self.stream.fileno())
+            os.close(devnull)
+        except (OSError, ValueError, AttributeError):  # no file descriptor (tests capture it)
+            pass
+        self.stream = open(os.devnull, "w")  # noqa: SIM115  (for the rest of the command)
+
+    def __getattr__(self, name: str) -> Any:  # isatty, fileno, encoding, … of the stream written to
+        return getattr(self.stream, name)
 
 
 def _main(argv: Sequence[str] | None, said: list[str]) -> int:

@@ -99,6 +99,7 @@ def replay_kind(data: Any, source: Path) -> str:
     Raises ``ConfigError``; a file of another kind has been refused by :func:`mobisense.core.kinds.check_command_kind`.
     """
     from ..core.config import ConfigError
+    from ..core.errors import brief
 
     if data is None:
         raise ConfigError(f"{source}: (top level): the file is empty; expected a mapping of keys")
@@ -107,7 +108,6 @@ def replay_kind(data: Any, source: Path) -> str:
             f"{source}: (top level): expected a mapping of keys (a field replay, a plan replay or a re-planning file)"
         )
     kind = data.get("kind")
-    kind = kind if isinstance(kind, str) else None  # a list or mapping is reported by the model
     if kind in REPLAY_KINDS:
         return str(kind)
     if "field" in data:
@@ -116,6 +116,8 @@ def replay_kind(data: Any, source: Path) -> str:
         return "plan_replay"
     if "replan" in data:  # a re-planning file without its kind: key
         return "replan"
+    if "kind" in data:  # neither a replay kind nor the shape of one
+        raise ConfigError(f"{source}: kind: expected one of {', '.join(map(repr, REPLAY_KINDS))}, got {brief(kind)}")
     raise ConfigError(
         f"{source}: (top level): expected a field replay (key 'field') or a replay of an optimised "
         "solution (key 'solution')"

@@ -107,19 +107,11 @@ class ComparedSolution(Solution):
         other = self.indirect
         if other is None:
             return content
-        dims = {
-            "Sigma": ("time_indirect", "row", "col"),
-            "p": ("time_indirect", "sensor", "xy"),
-            "v": ("time_indirect", "sensor", "xy"),
-            "u": ("time_indirect", "sensor", "xy"),
-            "Lam": ("time_indirect", "row", "col"),
-            "lam_p": ("time_indirect", "sensor", "xy"),
-            "lam_v": ("time_indirect", "sensor", "xy"),
-        }
-        from .solution_dataset import variable_attrs
+        from .solution_dataset import DIMENSIONS, variable_attrs
 
         content.add_coord("time_indirect", ("time_indirect",), other.t, variable_attrs(self, "time_indirect"))
-        for name, dim in dims.items():
+        for name in ("Sigma", "p", "v", "u", "Lam", "lam_p", "lam_v"):  # on the BVP's nodes, the controls too
+            dim = ("time_indirect", *DIMENSIONS[name][1:])
             attrs = variable_attrs(self, name, " (indirect solution)")
             content.add_variable(f"indirect_{name}", dim, getattr(other, name), attrs)
         return content

@@ -76,6 +76,19 @@ _NLP_DIMS = {"w": "nlp_variable", "lam_w": "nlp_variable", "lam_g": "nlp_constra
 
 _DESCRIBED = {**VARIABLES, **COORDINATES}
 
+#: variable -> its dimensions in ``solution.nc`` (as written, and as :func:`check_layout` checks a file read back)
+DIMENSIONS: dict[str, tuple[str, ...]] = {
+    "time": ("time",), "time_u": ("time_u",), "time_costate": ("time_costate",),
+    "Sigma": ("time", "row", "col"), "p": ("time", "sensor", "xy"), "v": ("time", "sensor", "xy"),
+    "u": ("time_u", "sensor", "xy"), "sigma_diag": ("time", "state"),
+    "Lam": ("time_costate", "row", "col"), "lam_p": ("time_costate", "sensor", "xy"),
+    "lam_v": ("time_costate", "sensor", "xy"),
+    "path_eps": ("step",), "path_p": ("step", "time", "sensor", "xy"), "path_Sigma": ("step", "time", "row", "col"),
+    **{f"nlp_{key}": (dim,) for key, dim in _NLP_DIMS.items()},
+}  # fmt: skip
+#: coordinates that are not index coordinates: their dimension
+_AUXILIARY = {"state_x": ("state",), "state_y": ("state",)}
+
 
 def variable_attrs(solution: Any, name: str, suffix: str = "") -> dict[str, str]:
     """``long_name`` and ``units`` of variable or coordinate ``name`` in the units of a Solution's problem."""
@@ -95,35 +108,23 @@ def solution_dataset(solution: Any) -> Any:
 def solution_content(solution: Any) -> DatasetContent:
     """What ``solution.nc`` holds, as numpy arrays (written without xarray, see the module notes)."""
     s, n = solution, solution.problem.n
-    sensor, cov = ("time", "sensor", "xy"), ("time", "row", "col")
-    arrays: dict[str, tuple[tuple[str, ...], Any]] = {
-        "Sigma": (cov, s.Sigma), "p": (sensor, s.p), "v": (sensor, s.v), "u": (("time_u", "sensor", "xy"), s.u),
-    }  # fmt: skip
-    coords: dict[str, tuple[tuple[str, ...], Any]] = {
-        "time": (("time",), s.t), "time_u": (("time_u",), s.t_u),
-        "sensor": (("sensor",), [x.name for x in s.problem.sensors]), "xy": (("xy",), ["x", "y"]),
-        "row": (("row",), np.arange(n)), "col": (("col",), np.arange(n)),
-    }  # fmt: skip
+    arrays: dict[str, Any] = {"Sigma": s.Sigma, "p": s.p, "v": s.v, "u": s.u}
+    coords: dict[str, Any] = {"time": s.t, "time_u": s.t_u, "sensor": [x.name for x in s.problem.sensors],
+                              "xy": ["x", "y"], "row": np.arange(n), "col": np.arange(n)}  # fmt: skip
     if s.problem.process.field is not None:
         locations = s.problem.process.field.process().locations
-        coords.update(state=(("state",), np.arange(n)), state_x=(("state",), locations[:, 0]),
-                      state_y=(("state",), locations[:, 1]))  # fmt: skip
-        arrays["sigma_diag"] = (("time", "state"), np.diagonal(s.Sigma, axis1=1, axis2=2))
+        coords.update(state=np.arange(n), state_x=locations[:, 0], state_y=locations[:, 1])
+        arrays["sigma_diag"] = np.diagonal(s.Sigma, axis1=1, axis2=2)
         if not s.stats.get("full_sigma", True):  # solver.shooting.full_sigma (default: n <= 25)
             del arrays["Sigma"], coords["row"], coords["col"]
     if s.Lam is not None:
-        coords["time_costate"] = (("time_costate",), s.t_costate)
-        arrays["Lam"] = (("time_costate", "row", "col"), s.Lam)
-        arrays["lam_p"] = (("time_costate", "sensor", "xy"), s.lam_p)
-        arrays["lam_v"] = (("time_costate", "sensor", "xy"), s.lam_v)
+        coords["time_costate"] = s.t_costate
+        arrays.update(Lam=s.Lam, lam_p=s.lam_p, lam_v=s.lam_v)
     if s.path_eps is not None:
-        coords["step"] = (("step",), np.arange(len(s.path_eps)))
-        arrays["path_eps"] = (("step",), s.path_eps)
-        arrays["path_p"] = (("step", "time", "sensor", "xy"), s.path_p)
-        arrays["path_Sigma"] = (("step", "time", "row", "col"), s.path_Sigma)
+        coords["step"] = np.arange(len(s.path_eps))
+        arrays.update(path_eps=s.path_eps, path_p=s.path_p, path_Sigma=s.path_Sigma)
     if s.nlp is not None:
-        for key, dim in _NLP_DIMS.items():
-            arrays[f"nlp_{key}"] = ((dim,), np.asarray(s.nlp[key]))
+        arrays.update({f"nlp_{key}": np.asarray(s.nlp[key]) for key in _NLP_DIMS})
     attrs = {
         "title": f"mobisense: solution of problem '{s.problem.name}' by the {s.method} method",
         "comment": "Sigma and Lam are full symmetric matrices; costates are those of J (minimisation, H = L + λ'f)",
@@ -141,24 +142,14 @@ def solution_content(solution: Any) -> DatasetContent:
     }  # fmt: skip
     content = DatasetContent(attrs=attrs)
     system = s.problem.units.system()
-    for name, (dims, values) in arrays.items():
-        content.add_variable(name, dims, values, _attrs(system, name))
-    for name, (dims, values) in coords.items():
-        content.add_coord(name, dims, values, _attrs(system, name))
+    for name, values in arrays.items():
+        content.add_variable(name, DIMENSIONS[name], values, _attrs(system, name))
+    for name, values in coords.items():
+        content.add_coord(name, _AUXILIARY.get(name, (name,)), values, _attrs(system, name))
     return content
 
 
 # ------------------------------------------------------------------------------------------ reading back
-#: what a Solution reads from ``solution.nc``: variable -> its dimensions (the checks of :func:`check_layout`)
-DIMENSIONS: dict[str, tuple[str, ...]] = {
-    "time": ("time",), "time_u": ("time_u",), "time_costate": ("time_costate",),
-    "Sigma": ("time", "row", "col"), "p": ("time", "sensor", "xy"), "v": ("time", "sensor", "xy"),
-    "u": ("time_u", "sensor", "xy"), "sigma_diag": ("time", "state"),
-    "Lam": ("time_costate", "row", "col"), "lam_p": ("time_costate", "sensor", "xy"),
-    "lam_v": ("time_costate", "sensor", "xy"),
-    "path_eps": ("step",), "path_p": ("step", "time", "sensor", "xy"), "path_Sigma": ("step", "time", "row", "col"),
-    **{f"nlp_{key}": (dim,) for key, dim in _NLP_DIMS.items()},
-}  # fmt: skip
 #: variables read together: a file with the first holds all of them
 _GROUPS = (("Lam", "lam_p", "lam_v", "time_costate"), ("path_eps", "path_p", "path_Sigma"),
            ("nlp_w", "nlp_lam_w", "nlp_lam_g", "nlp_P"))  # fmt: skip

@@ -164,6 +164,11 @@ BAD = [
         "motion.level: the reciprocal level function needs C > 0",
     ),
     ("replay_two_charges", _delete(["field"]), "expected a field replay (key 'field')"),
+    (  # a kind that is none of replay's, on a file without the keys of one: the kind is named, not the shape
+        "replay_two_charges",
+        lambda d: {"kind": 3, **{k: v for k, v in _delete(["field"])(d).items() if k != "kind"}},
+        "kind: expected one of 'field_replay', 'plan_replay', 'replan', got 3",
+    ),
 ]
 
 

@@ -277,13 +277,16 @@ def test_closed_or_full_standard_output(tmp_path, command):
     assert done.stderr.count("\n") == 1 and "No space left on device" in done.stderr and "Traceback" not in done.stderr
 
 
-def test_closed_standard_error_loses_no_result(tmp_path):
+@pytest.mark.parametrize("redirect", ["2>&-", "2>/dev/full"], ids=["closed", "full"])
+def test_unwritable_standard_error_loses_no_result(tmp_path, redirect):
     import sys
 
     environment = {k: v for k, v in os.environ.items() if k != "MOBISENSE_TRACEBACK"}
     out = tmp_path / "out"
-    line = f"exec {sys.executable} -m mobisense.cli solve hussein2008 --no-plot --out {out} 2>&-"
+    # progress and messages go to standard error: closed or on a full disk, they are lost, the solution is not
+    line = f"exec {sys.executable} -m mobisense.cli solve hussein2008 --no-plot --out {out} {redirect}"
     done = subprocess.run(["sh", "-c", line], cwd=tmp_path, capture_output=True, text=True, env=environment,
                           timeout=120)  # fmt: skip
     assert done.returncode == 0 and (out / "solution.nc").is_file() and (out / "summary.json").is_file()
+    assert "J (ε = 1)" in done.stdout  # the table, on standard output, is still printed
     assert "error" not in done.stdout  # messages are discarded, never printed on standard output instead
