@@ -7,6 +7,7 @@ that reads a file also accepts a shipped example's name (``mobisense solve husse
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -84,6 +85,8 @@ def resolve_input(path: str | Path) -> Path:
     Only a bare name (no folder) is looked up among the examples, so a missing ``dir/x.yaml`` is reported as
     missing rather than silently replaced.
     """
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"expected the path of a YAML file or the name of a shipped example, got {type(path).__name__}")
     path = Path(path)
     if path.exists() or path.parent != Path("."):
         return path

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -44,6 +44,11 @@ def solve(
         ``status`` tells whether ε = 1 was reached; a failed solve keeps what was solved. A solution with
         NaN or infinite values is never ``solved``.
     """
+    if isinstance(problem, Mapping):
+        raise TypeError("solve: problem: expected a Problem, a YAML path or an example's name, got a mapping "
+                        "(Problem.from_dict validates one)")  # fmt: skip
+    if init is not None and not isinstance(init, Solution):
+        raise TypeError(f"solve: init: expected a Solution (of an earlier solve), got {type(init).__name__}")
     if not isinstance(problem, Problem):
         problem = load_problem(problem)
     method = method or problem.solver.method

@@ -28,7 +28,7 @@ def _run(code: str, **env: str) -> subprocess.CompletedProcess:
 
 
 def test_importing_the_package_loads_nothing_heavy():
-    # the import-time target itself (< 0.3 s) is measured in benchmarks/bench_commands.py
+    # the import-time target itself (--help < 0.3 s) is measured in benchmarks/bench_ocp_speed.py
     code = f"import sys, mobisense; print([m for m in {HEAVY!r} if m in sys.modules])"
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert result.stdout.strip() == "[]"
@@ -43,6 +43,29 @@ def test_version_matches_the_installed_distribution_and_the_command():
 def test_unknown_public_name_is_an_attribute_error():
     with pytest.raises(AttributeError, match="no attribute 'not_a_name'"):
         mobisense.not_a_name  # noqa: B018
+
+
+PATH_EXPECTED = "expected the path of a YAML file or the name of a shipped example"
+
+
+@pytest.mark.parametrize(
+    "call,message",
+    [
+        (lambda: solve({"process": {}}), "solve: problem: expected a Problem, a YAML path or an example's name, got a "
+                                         "mapping"),
+        (lambda: solve(None), f"{PATH_EXPECTED}, got NoneType"),
+        (lambda: mobisense.load_problem(3), f"{PATH_EXPECTED}, got int"),
+        (lambda: mobisense.load_scenario(["a"]), f"{PATH_EXPECTED}, got list"),
+        (lambda: solve("hussein2008", init="previous.nc"), "solve: init: expected a Solution (of an earlier solve), "
+                                                           "got str"),
+    ],
+    ids=["mapping", "None", "int", "list", "init"],
+)  # fmt: skip
+def test_arguments_of_the_wrong_type_are_named(call, message):
+    # a programming error in a script: a TypeError that says which argument and what it takes, before any work
+    with pytest.raises(TypeError) as raised:
+        call()
+    assert message in str(raised.value)
 
 
 @pytest.fixture(scope="module")
