@@ -34,7 +34,10 @@ class SolveCommand:
         )
         parser.add_argument("--out", type=output_path, default=None, help="output folder (default: out/<file name>)")
         parser.add_argument("--method", choices=METHODS.names(), default=None, help="override solver.method")
-        parser.add_argument("--intervals", type=int, default=None, help="override solver.collocation.intervals")
+        parser.add_argument(
+            "--intervals", type=int, default=None,
+            help="override solver.collocation.intervals (solver.shooting.intervals with the shooting method)",
+        )  # fmt: skip
         parser.add_argument("--degree", type=int, default=None, help="override solver.collocation.degree")
         parser.add_argument(
             "--scheme", choices=SCHEMES.names(), default=None, help="override solver.collocation.scheme"
@@ -204,6 +207,12 @@ def apply_overrides(data: dict[str, Any], args: argparse.Namespace) -> dict[str,
         for k, v in (("intervals", args.intervals), ("degree", args.degree), ("scheme", args.scheme))
         if v is not None
     }
+    process = data.get("process")
+    field = isinstance(process, dict) and process.get("field") is not None
+    if "intervals" in collocation and solver.get("method", "shooting" if field else "direct") == "shooting":
+        shooting = solver.setdefault("shooting", {})  # the grid this method solves on (no collocation)
+        if isinstance(shooting, dict):
+            shooting["intervals"] = collocation.pop("intervals")
     if collocation:
         solver.setdefault("collocation", {}).update(collocation)
     homotopy = {k: v for k, v in (("mode", args.homotopy), ("step", args.step)) if v is not None}

@@ -27,38 +27,56 @@ from pydantic import Field, model_validator
 from ..core.config import InvalidValue, PositiveFloat, StrictModel
 
 __all__ = [
-    "ShootingOptions","MAX_FIELD_STATES", "SHOOTING_MEMORY_LIMIT", "FieldKernel", "FieldSpec", "FieldProcess",
-           "shooting_substeps", "shooting_memory_bytes"]
+    "ShootingOptions","MAX_FIELD_STATES", "MAX_SUBSTEPS", "FieldKernel", "FieldSpec", "FieldProcess",
+           "shooting_substeps", "shooting_rate", "shooting_memory_bytes", "shooting_seconds"]
 
 #: The largest grid nx·ny accepted: Kₛ and every Σ are dense n × n (n = 2500: 50 MB per matrix).
 MAX_FIELD_STATES = 2500
 
 
-#: The largest estimated working set of a shooting solve (bytes; the issue's 4 GB target for n = 100).
-SHOOTING_MEMORY_LIMIT = 4 * 1024**3
+#: The most RK4 substeps per shooting interval (also the bound of ``solver.shooting.substeps``).
+MAX_SUBSTEPS = 1000
+
+
+def shooting_rate(spec: FieldSpec, noise_variances: list[float]) -> float:
+    """λ_max = sqrt(a² + 2a Σ_i σ²/r_i) (1/T, a = 1/τ): a bound of the Hamiltonian system's eigenvalues.
+
+    It holds for every sensor configuration (c̃'c̃ = k'Kₛ⁻¹k ≤ σ²); docs/theory/field.md §3.3.
+    """
+    a = 1.0 / spec.time_constant
+    info = sum(spec.kernel.variance / r for r in noise_variances)
+    return math.sqrt(a * a + 2.0 * a * info)
 
 
 def shooting_substeps(spec: FieldSpec, noise_variances: list[float], duration: float, intervals: int,
                       max_h_lambda: float = 0.25) -> int:  # fmt: skip
     """Möbius-RK4 steps per interval so that h·λ_max ≤ ``max_h_lambda`` (docs/theory/field.md §3.3).
 
-    λ_max = sqrt(a² + 2a Σ_i σ²/r_i) (a = 1/τ) bounds the eigenvalues of the linear Hamiltonian system
-    for every sensor configuration (c̃'c̃ = k'Kₛ⁻¹k ≤ σ²). 0.25 is an accuracy target: cost error
-    9e-8 relative at K = 100 (m = 2) against 1.2e-6 at m = 1.
+    λ_max is :func:`shooting_rate`. 0.25 is an accuracy target: cost error 9e-8 relative at K = 100 (m = 2)
+    against 1.2e-6 at m = 1.
     """
-    a = 1.0 / spec.time_constant
-    info = sum(spec.kernel.variance / r for r in noise_variances)
     h = duration / intervals
-    return max(1, math.ceil(h * math.sqrt(a * a + 2.0 * a * info) / max_h_lambda - 1e-9))
+    return max(1, math.ceil(h * shooting_rate(spec, noise_variances) / max_h_lambda - 1e-9))
 
 
 def shooting_memory_bytes(n: int, intervals: int, substeps: int) -> int:
-    """Estimated peak memory (bytes) of the shooting NLP: 8 n² ((K+1)(4m+2) + 3).
+    """Estimated peak memory (bytes) of a shooting solve: 8 n² ((K+1)(4m+2) + 3) for the NLP, 24 n² (K+1) for Σ(t).
 
     The adjoint sweep keeps every interval's whitened Z and, per substep, about four n × n temporaries
-    (measured at n = 100, K = 100, m = 2: 85 MB above the interpreter's 95 MB; this formula gives 81 MB).
+    (measured at n = 100, K = 100, m = 2: 85 MB above the interpreter's 95 MB; the NLP term gives 81 MB); the
+    solution holds Σ(t), its copy in the dataset and the baseline's. K·m, and so the memory, grows with the
+    horizon times λ_max (:func:`shooting_rate`), not with K: m falls as K grows.
     """
-    return 8 * n * n * ((intervals + 1) * (4 * substeps + 2) + 3)
+    return 8 * n * n * ((intervals + 1) * (4 * substeps + 2) + 3) + 24 * n * n * (intervals + 1)
+
+
+def shooting_seconds(n: int, intervals: int, substeps: int) -> float:
+    """A lower estimate of a shooting solve's time (s): 10 iterations of K·m RK4 substeps of ~4 n³ flops each.
+
+    At 2·10¹⁰ flop/s (more than one core sustains); the shipped 10 × 10 field (n = 100, K = 100, m = 2)
+    measures 31 s against 0.4 s estimated: a bound that refuses only what cannot finish in the time allowed.
+    """
+    return 10.0 * intervals * substeps * 4.0 * float(n) ** 3 / 2e10
 
 
 class FieldKernel(StrictModel):
@@ -148,7 +166,9 @@ class ShootingOptions(StrictModel):
 
     intervals: int = Field(100, ge=2, le=10_000, description="K control intervals of the final solve")
     coarse_intervals: int = Field(25, ge=2, le=10_000, description="intervals of the ε-homotopy")
-    substeps: int | None = Field(None, ge=1, le=1000, description="RK4 steps per interval (default: h·λ ≤ 0.25)")
+    substeps: int | None = Field(
+        None, ge=1, le=MAX_SUBSTEPS, description="RK4 steps per interval (default: h·λ ≤ 0.25)"
+    )
     memory: int = Field(30, ge=2, le=500, description="L-BFGS history length")
     homotopy: list[float] = Field([0.03, 0.1, 0.2, 0.4, 0.7, 1.0], min_length=1, description="coarse ε schedule")
     homotopy_tolerance: float = Field(1e-5, gt=0.0, lt=1.0, description="Ipopt tol of the coarse steps")

@@ -44,7 +44,7 @@ from ..core.config import (
     parse_config,
 )
 from ..core.units import LengthUnit, PhysicalUnit, TimeUnit, UnitSystem
-from .field import SHOOTING_MEMORY_LIMIT, FieldSpec, ShootingOptions, shooting_memory_bytes, shooting_substeps
+from .field import MAX_SUBSTEPS, FieldSpec, ShootingOptions, shooting_rate, shooting_substeps
 from .noise_models import NoiseModel, parse_noise
 from .path_constraints import PathConstraints, check_initial_state
 from .solver_options import BVPOptions, CollocationOptions, HomotopyOptions, SolverOptions
@@ -296,15 +296,27 @@ class Problem(StrictModel):
         return self
 
     def _check_shooting_size(self) -> None:
-        """Refuse, before anything of size n² is allocated, a shooting NLP larger than the memory limit."""
-        o, n, T = self.solver.shooting, self.n, self.horizon.tf - self.horizon.t0
-        if all(s.noise.model == "constant" for s in self.sensors):  # else refused per sensor below
-            m = o.substeps or shooting_substeps(self.process.field, [s.noise.parameters()[0] for s in self.sensors],
-                                                T, o.intervals)  # fmt: skip
-            if (need := shooting_memory_bytes(n, o.intervals, m) / 2**30) > (limit := SHOOTING_MEMORY_LIMIT / 2**30):
-                raise InvalidValue("solver.shooting.intervals", f"n = {n} states on K = {o.intervals} intervals "
-                                   f"(m = {m} substeps) need about {need:.1f} GB, more than {limit:.0f} GB; "
-                                   "use a coarser grid or fewer intervals")  # fmt: skip
+        """Refuse a field whose default RK4 substeps (h·λ_max ≤ 0.25) exceed :data:`MAX_SUBSTEPS` per interval.
+
+        Memory and time are the commands' budget (``--max-memory``, ``--max-time``: :mod:`mobisense.ocp.sizes`);
+        this bounds the number of steps, whatever the machine. The key named is the one that makes λ_max large:
+        the noise variance of the most informative sensor, or the field's time constant.
+        """
+        o, spec, T = self.solver.shooting, self.process.field, self.horizon.tf - self.horizon.t0
+        if o.substeps is not None or not all(s.noise.model == "constant" for s in self.sensors):
+            return  # a range-dependent noise is refused per sensor
+        noise = [s.noise.parameters()[0] for s in self.sensors]
+        m = shooting_substeps(spec, noise, T, o.intervals)
+        if m <= MAX_SUBSTEPS:
+            return
+        a, rate = 1.0 / spec.time_constant, shooting_rate(spec, noise)
+        i = min(range(len(noise)), key=noise.__getitem__)
+        key, cause = (f"sensors[{i}].noise.variance_value", f"noise variance {noise[i]:g}") if rate > 2 * a else (
+            "process.field.time_constant", f"time constant {spec.time_constant:g}")  # fmt: skip
+        raise InvalidValue(key, f"the {cause} makes the field's fastest rate λ_max = {rate:.3g} per unit time; "
+                           f"on intervals h = {T / o.intervals:.3g} the shooting method needs m = {m} RK4 substeps "
+                           f"(h·λ_max ≤ 0.25), expected at most {MAX_SUBSTEPS} (more solver.shooting.intervals, "
+                           "a larger noise variance or time constant, or solver.shooting.substeps)")  # fmt: skip
 
     def _check_point_sensor(self, i: int, sensor: Sensor) -> None:
         if self.process.field is None:

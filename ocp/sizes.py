@@ -82,17 +82,19 @@ def indirect_estimate(problem: Problem) -> Estimate:
 
 
 def shooting_estimate(problem: Problem) -> Estimate:
-    """Peak memory of the reduced-space shooting method (:func:`mobisense.ocp.field.shooting_memory_bytes`)."""
-    from .field import shooting_memory_bytes, shooting_substeps
+    """Peak memory and least time of the reduced-space shooting method (:mod:`mobisense.ocp.field`)."""
+    from .field import shooting_memory_bytes, shooting_seconds, shooting_substeps
 
     o, n = problem.solver.shooting, problem.n
     noise = [s.noise.parameters()[0] for s in problem.sensors]
     m = o.substeps or shooting_substeps(problem.process.field, noise, problem.horizon.tf - problem.horizon.t0,
                                         o.intervals)  # fmt: skip
-    solution = 3 * 8.0 * (o.intervals + 1) * n * n  # Σ(t), its copy in the dataset and the baseline
-    what = f"the shooting NLP (n = {n} field states, N = {problem.N} sensors, K = {o.intervals}, m = {m})"
-    return Estimate(what, shooting_memory_bytes(n, o.intervals, m) + solution,
-                    "use a coarser grid or fewer intervals (solver.shooting.intervals)")  # fmt: skip
+    what = (f"the shooting NLP (n = {n} field states, N = {problem.N} sensors, K = {o.intervals} intervals of m = {m} "
+            "RK4 substeps)")  # fmt: skip
+    return Estimate(what, shooting_memory_bytes(n, o.intervals, m),
+                    "use a coarser grid (process.field.grid) or a shorter horizon; memory grows with n² K·m, and "
+                    "K·m with the horizon times the field's fastest rate (docs/theory/field.md §3.3), not with K",
+                    shooting_seconds(n, o.intervals, m))  # fmt: skip
 
 
 def problem_estimates(

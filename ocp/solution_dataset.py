@@ -146,6 +146,11 @@ def solution_content(solution: Any) -> DatasetContent:
         content.add_variable(name, DIMENSIONS[name], values, _attrs(system, name))
     for name, values in coords.items():
         content.add_coord(name, _AUXILIARY.get(name, (name,)), values, _attrs(system, name))
+    if s.method == "shooting":  # no collocation points, no costates (docs/theory/field.md §3)
+        for name in ("time", "time_u"):
+            what = "states" if name == "time" else "controls (piecewise linear between them)"
+            content.coords[name][2]["long_name"] = f"time of the {what}: the shooting intervals' boundaries"
+        content.attrs["comment"] = "Sigma (when stored) is the full symmetric covariance; shooting has no costates"
     return content
 
 

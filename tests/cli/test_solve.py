@@ -165,6 +165,22 @@ def test_command_line_override_is_validated(tmp_path, capsys):
     assert code == 2 and "solver.collocation.intervals" in stderr
 
 
+def test_intervals_set_the_grid_of_the_method_that_solves():
+    import argparse
+
+    from mobisense.ocp.commands import apply_overrides
+
+    args = argparse.Namespace(method=None, strategy=None, intervals=30, degree=None, scheme=None, homotopy=None,
+                              step=None)  # fmt: skip
+    field = yaml.safe_load((PROBLEMS / "field_mapping_5x5.yaml").read_text(encoding="utf-8"))
+    # a field problem is solved by shooting (its default method): --intervals is the shooting grid's K
+    assert apply_overrides(field, args)["solver"]["shooting"]["intervals"] == 30
+    assert "intervals" not in field["solver"].get("collocation", {})
+    collocated = apply_overrides({**field, "solver": {"method": "direct"}}, args)["solver"]
+    assert collocated["collocation"]["intervals"] == 30 and "shooting" not in collocated
+    assert apply_overrides(hussein2008(), args)["solver"]["collocation"]["intervals"] == 30
+
+
 def test_solver_failure_keeps_results_and_names_the_constraint(tmp_path, capsys):
     # 3 Ipopt iterations cannot solve the first, cold step (it needs 19): the run fails, exits 1, and keeps
     # what it has (the coasting ε → 0 solution) with the failure described in problem terms.

@@ -173,12 +173,29 @@ def test_cost_converges_at_order_four_under_refinement():
     assert orders.min() > 3.5, (costs, orders)  # docs/theory/field.md §3.3: stated order 4
 
 
+def _noise(value: float):
+    def apply(data):
+        data["sensors"][0]["noise"]["variance_value"] = value
+        return data
+
+    return apply
+
+
 @pytest.mark.parametrize(
-    ("grid", "shooting", "message"),
-    [((1000, 1000), {}, "process.field.grid: expected nx·ny <= 2500"),
-     ((50, 50), {"intervals": 2000}, "solver.shooting.intervals: n = 2500 states on K = 2000")],
+    ("grid", "shooting", "change", "options", "message"),
+    [((1000, 1000), {}, None, [], "process.field.grid: expected nx·ny <= 2500"),
+     # memory n² K m: the budget's message (memory does not fall with K: m grows as K falls)
+     ((50, 50), {"intervals": 2000}, None, [], "too large: the shooting NLP (n = 2500 field states, N = 1 sensors, "
+                                               "K = 2000 intervals of m = 1 RK4 substeps) needs about 839 GiB"),
+     ((20, 20), {}, None, ["--max-memory", "200M"], "the shooting NLP (n = 400 field states"),
+     # λ_max = sqrt(a² + 2aσ²/r) = sqrt(0.01 + 2e8) = 1.41e4 for a = 1/τ = 0.1, σ² = 1, r = 1e-9; h = 5/100:
+     # m = ceil(h λ_max / 0.25) = 2829 substeps; the noise variance (2aσ²/r ≫ a²) is the key named
+     ((2, 2), {}, _noise(1e-9), [], "sensors[0].noise.variance_value: the noise variance 1e-09 makes the field's "
+                                    "fastest rate λ_max = 1.41e+04 per unit time; on intervals h = 0.05 the shooting "
+                                    "method needs m = 2829 RK4 substeps (h·λ_max ≤ 0.25), expected at most 1000")],
+    ids=["grid", "memory", "budget", "substeps"],
 )  # fmt: skip
-def test_hostile_sizes_are_refused_before_allocation(tmp_path, capsys, grid, shooting, message):
+def test_hostile_sizes_are_refused_before_allocation(tmp_path, capsys, grid, shooting, change, options, message):
     import tracemalloc
 
     import yaml
@@ -186,9 +203,10 @@ def test_hostile_sizes_are_refused_before_allocation(tmp_path, capsys, grid, sho
     from mobisense import cli
 
     path = tmp_path / "huge.yaml"
-    path.write_text(yaml.safe_dump(field_problem(grid=grid, shooting=shooting)))
+    data = field_problem(grid=grid, shooting=shooting)
+    path.write_text(yaml.safe_dump(change(data) if change else data, allow_unicode=True))
     tracemalloc.start()
-    code = cli.main(["solve", str(path), "--out", str(tmp_path / "out")])
+    code = cli.main(["solve", str(path), "--out", str(tmp_path / "out"), *options])
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     err = capsys.readouterr().err.strip()
