@@ -195,7 +195,9 @@ def _local_workers(requested: int | None) -> int:
 
 def apply_overrides(data: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
     """Apply command-line overrides to the raw problem dict (validated afterwards like the file)."""
-    solver = data.setdefault("solver", {}) if isinstance(data, dict) else {}
+    if not isinstance(data, dict):  # the model says what a file of another shape lacks
+        return data
+    solver = data.setdefault("solver", {})
     if not isinstance(solver, dict):
         return data
     if args.method is not None:

@@ -78,6 +78,10 @@ class SolveReporter:
         table.add_row("  terminal Tr[MΣ(tf)]", f"{s['terminal_cost']:.10g}")
         table.add_row("  running ∫(α/2|u|² + Tr KΣ)", f"{s['running_cost']:.6g}")
         table.add_row("  control energy ∫α/2|u|²", f"{s['control_energy']:.6g}")
+        check = s.get("plan_check")
+        if check and check.get("cost") is not None:  # the controls integrated independently of the collocation
+            table.add_row("  J of the plan re-integrated", f"{check['cost']:.10g} (J differs by "
+                          f"{check['relative_difference']:.1e})")  # fmt: skip
         base = solution.baseline.get("cost")
         if base is not None:
             table.add_row("no-control baseline J (u ≡ 0)", f"{base:.10g}")

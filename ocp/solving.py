@@ -56,4 +56,8 @@ def solve(
         raise ConfigError(f"solver.method: {METHODS.unknown(method)}")
     solution = METHODS[method](problem, progress=progress, init=init)
     solution.reject_non_finite()
+    if solution.success and solution.collocation is not None:  # a direct plan: its J checked independently
+        from .direct.plan_check import check_plan
+
+        solution.stats["plan_check"] = check_plan(solution)
     return solution
