@@ -32,6 +32,8 @@ class CollocationScheme:
     D: np.ndarray = field(init=False)  # (d+1, d) derivative of basis j at collocation node r
     E: np.ndarray = field(init=False)  # (d+1,) basis at tau = 1 (end of interval)
     W: np.ndarray = field(init=False)  # (d,) quadrature weights on the collocation nodes
+    #: (d, d) row i: the i-th Bernstein coefficient of the control polynomial from its d node values
+    bernstein: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
         SCHEMES.check(self.scheme)
@@ -54,6 +56,7 @@ class CollocationScheme:
                     basis *= np.poly1d([1.0, -tau[r + 1]]) / (tau[j + 1] - tau[r + 1])
             antiderivative = np.polyint(basis)
             W[j] = antiderivative(1.0) - antiderivative(0.0)
+        object.__setattr__(self, "bernstein", _bernstein_from_nodes(tau[1:]))
         object.__setattr__(self, "tau", tau)
         object.__setattr__(self, "D", D)
         object.__setattr__(self, "E", E)
@@ -106,3 +109,19 @@ class CollocationScheme:
                 if r != j:
                     out[:, j] *= (s - points[r]) / (points[j] - points[r])
         return out
+
+
+def _bernstein_from_nodes(nodes: np.ndarray) -> np.ndarray:
+    """The matrix B (d, d) with ``c = B u``: Bernstein coefficients on [0, 1] of the polynomial through ``(nodes, u)``.
+
+    The polynomial of degree m = d − 1 is ``Σ_i c_i C(m, i) τ^i (1 − τ)^(m−i)``: a convex combination of the
+    ``c_i`` at every τ ∈ [0, 1], so a vector polynomial stays in their convex hull, and ``|c_i| ≤ u_max`` for all
+    i bounds ``|u(τ)|`` on the whole interval. From the monomial coefficients a_k: c_i = Σ_{k≤i} C(i,k)/C(m,k) a_k.
+    """
+    from math import comb
+
+    d = len(nodes)
+    m = d - 1
+    monomial = np.linalg.inv(np.vander(nodes, d, increasing=True))  # a = monomial @ u
+    to_bernstein = np.array([[comb(i, k) / comb(m, k) if k <= i else 0.0 for k in range(d)] for i in range(d)])
+    return to_bernstein @ monomial

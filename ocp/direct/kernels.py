@@ -169,7 +169,9 @@ class IntervalKernels:
             L = m.running(nodes.x[r], nodes.u[r], P)
             quad += h * c.W[r] * L[0]
             energy += h * c.W[r] * L[1]
-            bounds.append(m.control_bounds(nodes.u[r], P)[0])
+            # |u| ≤ u_max on the Bernstein coefficients: the bound holds on the whole interval (path_constraints.md)
+            hull = sum(c.bernstein[r, j] * nodes.u[j] for j in range(d))
+            bounds.append(m.control_bounds(hull, P)[0])
         cons = [m.path(nodes.x[r], P) for r in range(d)] if self.n_cons else []
         y_end_scaled = nodes.y_end / x_scale[ns:]
         nxt = a[self.nx + self.nz :]

@@ -71,6 +71,8 @@ def resimulate_sensors(
 def constraint_report(problem: Problem, tr: Any, result: Any, P: np.ndarray, u: np.ndarray) -> dict[str, Any]:
     """``{group: {active, max_violation, max_violation_at_nodes, max_multiplier, units}}`` of a direct solution.
 
+    The groups are the path constraints' and ``u_max`` (the bounds on |u|, sampled on the controls' polynomials).
+
     Parameters
     ----------
     problem : Problem
@@ -85,33 +87,44 @@ def constraint_report(problem: Problem, tr: Any, result: Any, P: np.ndarray, u: 
     Notes
     -----
     ``max_violation`` is the largest physical violation (penetration depth (L), separation deficit (L),
-    speed excess (L/T), distance outside the workspace (L); ≤ 0 means satisfied with that margin) on the
+    speed excess (L/T), distance outside the workspace (L), |u| − u_max (L/T²); ≤ 0 means satisfied with that
+    margin) on the
     re-simulated path; ``max_multiplier`` the largest multiplier of the group's rows in cost units per unit
     of the row's physical value (zero when inactive); ``units`` the unit of ``max_violation``, the problem's
     length (or speed) unit in UDUNITS, as in ``solution.nc``.
     """
     k, K, d = tr.kernels, tr.intervals, tr.colloc.degree
-    if not k.n_cons:
-        return {}
-    constraints = problem.constraints
-    rows = result.g[: K * k.nr].reshape(K, k.nr)[:, k.nr - k.n_cons :].reshape(K * d, -1)
-    scales = tr.constraint_scales(P)[: K * k.nr].reshape(K, k.nr)[:, k.nr - k.n_cons :].reshape(K * d, -1)
+    system = problem.units.system()  # the problem's declared units, as in solution.nc (UDUNITS)
     cost_scale = float(tr.layout.unpack(np.asarray(P, float))["cost_scale"][0])
-    lam = result.lam_g[: K * k.nr].reshape(K, k.nr)[:, k.nr - k.n_cons :].reshape(K * d, -1)
-    lam = lam * cost_scale / scales
+    out: dict[str, Any] = {}
+
+    def block(values: np.ndarray, first: int, count: int) -> np.ndarray:
+        """The rows ``first … first + count`` of every interval, as (K·d, count / d)."""
+        return values[: K * k.nr].reshape(K, k.nr)[:, first : first + count].reshape(K * d, -1)
+
+    def rows_of(first: int, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Scaled rows, NLP multipliers and multipliers per physical unit of those rows."""
+        rows, lam = block(result.g, first, count), block(result.lam_g, first, count)
+        return rows, lam, lam * cost_scale / block(tr.constraint_scales(P), first, count)
+
+    if k.n_bound:
+        out["u_max"] = _control_report(problem, tr, u, *rows_of(k.n_gap + k.n_path, k.n_bound), system.of(length=1,
+                                       time=-2))  # fmt: skip
+    if not k.n_cons:
+        return out
+    constraints = problem.constraints
+    rows, lam_nlp, lam = rows_of(k.nr - k.n_cons, k.n_cons)
     groups = np.array([g for g, _ in tr.model.path_labels])
     t, p, v = resimulate_sensors(problem, u, tr.colloc.scheme, d)
     violation = margins(constraints, p, v)
     _, p_nodes, v_nodes = _node_states(tr, result, P)
     at_nodes = margins(constraints, p_nodes, v_nodes)
-    system = problem.units.system()  # the problem's declared units, as in solution.nc (UDUNITS)
     length, speed = system.of(length=1), system.of(length=1, time=-1)
-    out: dict[str, Any] = {}
     for name in group_names(tr.structure.path):
         mask = groups == name
         worst = int(np.argmax(violation[name]))
         out[name] = {
-            "active": bool(rows[:, mask].max() >= -ACTIVE_TOLERANCE),
+            "active": _active(rows[:, mask], lam_nlp[:, mask]),
             "max_violation": float(violation[name].max()),
             "max_violation_time": float(t[worst]),
             "max_violation_at_nodes": float(at_nodes[name].max()),
@@ -119,6 +132,40 @@ def constraint_report(problem: Problem, tr: Any, result: Any, P: np.ndarray, u: 
             "units": speed if name == "max_speed" else length,
         }
     return out
+
+
+def _active(rows: np.ndarray, multipliers: np.ndarray) -> bool:
+    """Whether rows ``g ≤ 0`` are active: one within :data:`ACTIVE_TOLERANCE` of 0, or its multiplier above its slack.
+
+    At an interior-point solution multiplier × slack ≈ μ for every row: an active row has a multiplier far above
+    its slack, an inactive one the reverse (a binding speed limit kept a slack of 2e-6…9e-6 with a multiplier of
+    4e-4 that the slack test alone missed). Both in NLP units.
+    """
+    return bool(rows.max() >= -ACTIVE_TOLERANCE or np.any(np.abs(multipliers) > -rows))
+
+
+def _control_report(problem: Problem, tr: Any, u: np.ndarray, rows: np.ndarray, lam_nlp: np.ndarray,
+                    lam: np.ndarray, units: str) -> dict[str, Any]:  # fmt: skip
+    """The ``u_max`` entry: |u(t)| − u_max of the bounded sensors between the nodes, activity, multipliers."""
+    K, d = tr.intervals, tr.colloc.degree
+    s = np.linspace(0.0, 1.0, 21)  # from the interval's start (the right limit there) to its end
+    tau = tr.colloc.tau[1:]
+    basis = np.array([[np.prod([(x - tau[r]) / (tau[j] - tau[r]) for r in range(d) if r != j]) for x in s]
+                      for j in range(d)])  # fmt: skip
+    samples = np.einsum("js,kjnc->ksnc", basis, u)  # (K, S, N, 2)
+    bounded = [i for i, sensor in enumerate(problem.sensors) if sensor.u_max is not None]
+    u_max = np.array([problem.sensors[i].u_max for i in bounded])
+    excess = np.linalg.norm(samples[:, :, bounded], axis=-1) - u_max  # (K, S, B)
+    worst = np.unravel_index(int(np.argmax(excess)), excess.shape)
+    h = (problem.horizon.tf - problem.horizon.t0) / K
+    return {
+        "active": _active(rows, lam_nlp),
+        "max_violation": float(excess.max()),
+        "max_violation_time": float(problem.horizon.t0 + h * (worst[0] + s[worst[1]])),
+        "max_violation_at_nodes": float((np.linalg.norm(u[:, :, bounded], axis=-1) - u_max).max()),
+        "max_multiplier": float(np.abs(lam).max()),
+        "units": units,
+    }
 
 
 def _node_states(tr: Any, result: Any, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

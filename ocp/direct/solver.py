@@ -236,7 +236,7 @@ def _assemble(
         stats=stats,
         collocation=(tr.colloc.scheme, tr.colloc.degree, tr.intervals),
     )
-    if run.result is not None and tr.kernels.n_cons:
+    if run.result is not None and (tr.kernels.n_cons or tr.kernels.n_bound):
         u_nodes = solution.u.reshape(tr.intervals, tr.colloc.degree, problem.N, 2)
         solution.stats["constraints"] = constraint_report(problem, tr, run.result, P, u_nodes)
     if run.result is not None:

@@ -121,3 +121,40 @@ def test_separation_holds_for_two_sensors_converging_and_inactive_multipliers_va
     # complementarity λ|g| ≈ μ ≤ 1e-9 at Ipopt's tol: 0.1 L away (|g| ≳ 0.1 scaled) λ ≤ 1e-8, ≤ 1e-6 of the active
     assert np.abs(lam[inactive]).max() <= 1e-6 * np.abs(lam).max()
     assert (lam[~inactive] >= -1e-12).all()
+
+
+def test_u_max_holds_between_the_nodes_where_the_control_polynomial_swings() -> None:
+    # the shipped rendezvous on a coarse grid: bounding |u| at the nodes alone let the Radau control polynomial
+    # reach |u| = 1.92 against u_max = 1.0 between them (K = 50); the bound on its Bernstein coefficients holds it
+    # on the whole interval (the polynomial is their convex combination)
+    data = yaml.safe_load((PROBLEMS / "terminal_and_bound.yaml").read_text())
+    data["sensors"][0]["u_max"] = 1.0
+    data["solver"]["collocation"]["intervals"] = 50
+    solution = solve_direct(Problem.from_dict(data))
+    assert solution.success, solution.message
+    scheme, d, K = solution.collocation
+    import casadi as ca
+
+    nodes = np.asarray(ca.collocation_points(d, scheme))
+    s = np.linspace(0.0, 1.0, 401)  # each interval's polynomial, evaluated here from the node values
+    basis = np.array([np.prod([(s - nodes[r]) / (nodes[j] - nodes[r]) for r in range(d) if r != j], axis=0)
+                      for j in range(d)])  # fmt: skip
+    u = np.einsum("js,kjc->ksc", basis, solution.u.reshape(K, d, 2))
+    # Ipopt's tolerance: the scaled row (|c|² − u_max²)/u_scale² ≥ −1e-9·… leaves |u| within 1e-6 of the bound
+    assert np.linalg.norm(u, axis=-1).max() <= 1.0 + 1e-6
+    report = solution.stats["constraints"]["u_max"]
+    assert report["active"] and report["max_violation"] <= 1e-6 and report["units"] == "m s-2"
+
+
+def test_a_binding_speed_limit_is_reported_active() -> None:
+    # an interior-point optimum keeps a slack of 2e-6…9e-6 on a binding row with a small multiplier: the
+    # multiplier, not the slack alone, says it binds (J rises from 15.84777 to 15.86493 with it)
+    data = yaml.safe_load((PROBLEMS / "hussein2008.yaml").read_text())
+    data["solver"]["collocation"]["intervals"] = 40
+    free = solve_direct(Problem.from_dict(data))
+    for limit, binding in ((2.2, True), (10.0, False)):
+        data["constraints"] = {"max_speed": limit}
+        solution = solve_direct(Problem.from_dict(data))
+        report = solution.stats["constraints"]["max_speed"]
+        assert report["active"] is binding, (limit, report)
+        assert (solution.cost > free.cost * (1 + 1e-4)) is binding
