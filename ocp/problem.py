@@ -397,10 +397,24 @@ class Problem(StrictModel):
         """The constraints the no-control baseline (every sensor coasting, u ≡ 0) violates, one line each.
 
         Coasting from ``p0, v0`` ends at ``p0 + v0 (tf − t0)`` with velocity ``v0``; a fixed terminal
-        position or velocity other than that is violated (to 1e-9 relative). ``u_max`` always holds.
+        position or velocity other than that is violated (to 1e-9 relative). The path constraints are checked
+        on the straight coasting paths at 4001 times (their worst violation, beyond 1e-9 of the length scale).
+        ``u_max`` always holds.
         """
         duration = self.horizon.tf - self.horizon.t0
         out = []
+        if self.constraints is not None:
+            from .path_constraints import margins
+
+            t = np.linspace(0.0, duration, 4001)
+            v = np.asarray([sensor.v0 for sensor in self.sensors], float)
+            p = np.asarray([sensor.p0 for sensor in self.sensors], float)[None] + t[:, None, None] * v[None]
+            tolerance = 1e-9 * max(1.0, float(np.abs(p).max()))
+            for name, excess in margins(self.constraints, p, np.broadcast_to(v, p.shape)).items():
+                worst = int(np.argmax(excess))
+                if excess[worst] > tolerance:
+                    out.append(f"constraints.{name}: coasting violates it by {excess[worst]:.3g} at "
+                               f"t = {self.horizon.t0 + t[worst]:g}")  # fmt: skip
         for i, sensor in enumerate(self.sensors):
             if sensor.terminal is None:
                 continue

@@ -158,3 +158,17 @@ def test_a_binding_speed_limit_is_reported_active() -> None:
         report = solution.stats["constraints"]["max_speed"]
         assert report["active"] is binding, (limit, report)
         assert (solution.cost > free.cost * (1 + 1e-4)) is binding
+
+
+def test_a_baseline_that_crosses_a_zone_or_leaves_the_workspace_is_infeasible() -> None:
+    # coasting is a straight line p0 + v0 t: keep_out.yaml's sensor (p0 = (10, 10), v0 = (0, -2)) ends at
+    # y = -10 at t = 10, 8 L below the workspace's y_min = -2; no improvement may be quoted against it
+    data = yaml.safe_load((PROBLEMS / "keep_out.yaml").read_text())
+    violations = Problem.from_dict(data).coasting_violations()
+    assert any(v.startswith("constraints.workspace: coasting violates it by 8 at t = 10") for v in violations)
+    # a disc of radius 1 centred on that line at (10, 0) (reached at t = 5): penetration depth 1
+    data["constraints"] = {"keep_out": [{"center": [10.0, 0.0], "radius": 1.0}]}
+    crossing = ["constraints.keep_out[0]: coasting violates it by 1 at t = 5"]
+    assert Problem.from_dict(data).coasting_violations() == crossing
+    data["constraints"] = {"keep_out": [{"center": [13.0, 0.0], "radius": 1.0}]}  # 3 L beside the line: clear
+    assert Problem.from_dict(data).coasting_violations() == []
