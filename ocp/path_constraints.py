@@ -18,10 +18,10 @@ check the re-simulated path between the nodes (:mod:`mobisense.ocp.direct.path_r
 from __future__ import annotations
 
 import sys
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
-from pydantic import Field, model_validator
+from pydantic import Discriminator, Field, Tag, model_validator
 
 from ..core.config import FiniteFloat, InvalidValue, PositiveFloat, StrictModel, Vector2
 
@@ -38,6 +38,7 @@ __all__ = [
     "margins",
     "group_names",
     "check_initial_state",
+    "check_terminal_states",
     "draw_constraints",
 ]
 
@@ -92,10 +93,26 @@ class Workspace(StrictModel):
         return self
 
 
+def _zone_kind(value: Any) -> str:
+    """Which kind of zone an entry of ``keep_out`` is: a polygon when it has ``polygon``, else a disc.
+
+    Told by its keys, so that a bad polygon is reported as a polygon (not as a disc missing ``center``).
+    """
+    if isinstance(value, dict):
+        return "polygon" if "polygon" in value else "disc"
+    return "polygon" if isinstance(value, KeepOutPolygon) else "disc"
+
+
+#: a zone of ``keep_out``: a disc or a convex polygon
+KeepOutZone = Annotated[
+    Annotated[KeepOutDisc, Tag("disc")] | Annotated[KeepOutPolygon, Tag("polygon")], Discriminator(_zone_kind)
+]
+
+
 class PathConstraints(StrictModel):
     """Constraints on the sensors' paths, enforced at every collocation node (direct method only)."""
 
-    keep_out: list[KeepOutDisc | KeepOutPolygon] = Field(default_factory=list)
+    keep_out: list[KeepOutZone] = Field(default_factory=list)
     min_separation: PositiveFloat | None = Field(None, description="smallest distance between two sensors (L)")
     max_speed: PositiveFloat | None = Field(None, description="largest sensor speed |v_i| (L/T)")
     workspace: Workspace | None = None
@@ -320,6 +337,35 @@ def check_initial_state(constraints: PathConstraints, p0: list[list[float]], v0:
                 f"sensors[{i}].{field}",
                 f"expected an initial state satisfying constraints.{name} (violated by {violation[0]:.3g})",
             )
+
+
+def check_terminal_states(constraints: PathConstraints, terminals: list[tuple[Any, Any]]) -> None:
+    """Raise :class:`InvalidValue` (``sensors[i].terminal.p`` or ``.v``) if a fixed end state violates a constraint.
+
+    ``terminals[i]`` is sensor i's ``(p, v)`` target, either None when free. An end state no path can reach
+    otherwise fails in Ipopt as an infeasible problem, blamed on a continuity row.
+    """
+    alone = PathConstraints(**{**constraints.model_dump(), "min_separation": None})
+    fixed = []
+    for i, (p, v) in enumerate(terminals):
+        if p is not None:
+            fixed.append((i, np.asarray(p, float)))
+            at = margins(alone, np.asarray(p, float)[None, None], np.zeros((1, 1, 2)))
+            for name, violation in at.items():
+                if name != "max_speed" and violation[0] > 0:
+                    raise InvalidValue(f"sensors[{i}].terminal.p", f"expected a terminal position satisfying "
+                                       f"constraints.{name} (violated by {violation[0]:.3g})")  # fmt: skip
+        speed = None if v is None else float(np.linalg.norm(np.asarray(v, float)))
+        if speed is not None and constraints.max_speed is not None and speed > constraints.max_speed:
+            raise InvalidValue(f"sensors[{i}].terminal.v", f"expected a terminal speed within constraints.max_speed "
+                               f"{constraints.max_speed:g}, got {speed:g}")  # fmt: skip
+    if constraints.min_separation is not None:
+        for a, (i, p) in enumerate(fixed):
+            for j, q in fixed[a + 1 :]:
+                if (gap := float(np.linalg.norm(p - q))) < constraints.min_separation:
+                    raise InvalidValue(f"sensors[{j}].terminal.p", f"expected a terminal position at least "
+                                       f"constraints.min_separation {constraints.min_separation:g} from sensor "
+                                       f"{i}'s, got {gap:g}")  # fmt: skip
 
 
 def _offending_sensor(constraints: PathConstraints, name: str, p: np.ndarray, v: np.ndarray) -> int:

@@ -46,7 +46,7 @@ from ..core.config import (
 from ..core.units import LengthUnit, PhysicalUnit, TimeUnit, UnitSystem
 from .field import MAX_SUBSTEPS, FieldSpec, ShootingOptions, shooting_rate, shooting_substeps
 from .noise_models import NoiseModel, parse_noise
-from .path_constraints import PathConstraints, check_initial_state
+from .path_constraints import PathConstraints, check_initial_state, check_terminal_states
 from .solver_options import BVPOptions, CollocationOptions, HomotopyOptions, SolverOptions
 
 MAX_DIRECT_FIELD_STATES = 9  #: a larger field is refused by the methods that carry Σ as variables
@@ -262,6 +262,8 @@ class Problem(StrictModel):
                     "method has no state-constrained arcs; remove constraints or use method 'direct'",
                 )
             check_initial_state(self.constraints, [s.p0 for s in self.sensors], [s.v0 for s in self.sensors])
+            ends = [(None, None) if s.terminal is None else (s.terminal.p, s.terminal.v) for s in self.sensors]
+            check_terminal_states(self.constraints, ends)
         for i, sensor in enumerate(self.sensors):
             if names.index(sensor.name) != i:
                 raise InvalidValue(f"sensors[{i}].name", f"duplicate sensor name {sensor.name!r}")

@@ -50,9 +50,20 @@ def test_resimulation_is_exact_for_a_constant_control() -> None:
 @pytest.mark.parametrize(
     "edit, key",
     [
-        ({"constraints": {"keep_out": [{"polygon": [[0, 0], [2, 0], [0.5, 0.5], [0, 2]]}]}}, "keep_out"),
+        # a zone is told by its keys: a bad polygon is reported as a polygon, not as a disc missing its centre
+        ({"constraints": {"keep_out": [{"polygon": [[0, 0], [2, 0], [0.5, 0.5], [0, 2]]}]}},
+         "constraints.keep_out[0].polygon: expected the vertices of a strictly convex polygon"),
+        ({"constraints": {"keep_out": [{"polygon": [[0, 0], [2, 0]]}]}}, "constraints.keep_out[0].polygon: "),
+        ({"constraints": {"keep_out": [{"center": [1.0, 1.0]}]}}, "constraints.keep_out[0].radius: required key"),
         ({"constraints": {"keep_out": [{"center": [10.0, 10.0], "radius": 1.0}]}}, "sensors[0].p0"),
         ({"constraints": {"max_speed": 1.0}}, "sensors[0].v0"),
+        # fixed end states no path can reach: refused when read (Ipopt blamed a continuity row, exit 1)
+        ({"constraints": {"keep_out": [{"center": [2.0, -2.0], "radius": 1.0}]}, "terminal": {"p": [2.0, -2.0]}},
+         "sensors[0].terminal.p: expected a terminal position satisfying constraints.keep_out[0]"),
+        ({"constraints": {"workspace": {"x": [-5, 15], "y": [-5, 15]}}, "terminal": {"p": [20.0, 0.0]}},
+         "sensors[0].terminal.p: expected a terminal position satisfying constraints.workspace (violated by 5)"),
+        ({"constraints": {"max_speed": 2.5}, "terminal": {"v": [3.0, 0.0]}},
+         "sensors[0].terminal.v: expected a terminal speed within constraints.max_speed 2.5, got 3"),
         ({"constraints": {"workspace": {"x": [1, 0], "y": [0, 1]}}}, "constraints.workspace.x"),
         ({"constraints": {"max_speed": 3.0}, "solver": {"method": "indirect"}}, "constraints"),
     ],
@@ -60,6 +71,8 @@ def test_resimulation_is_exact_for_a_constant_control() -> None:
 def test_bad_constraints_exit_2_with_the_key_path(tmp_path, capsys, edit, key) -> None:
     data = base()
     solver = edit.pop("solver", None)
+    if "terminal" in edit:
+        data["sensors"][0]["terminal"] = edit.pop("terminal")
     data.update(edit)
     if solver:
         data["solver"].update(solver)
