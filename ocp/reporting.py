@@ -98,9 +98,9 @@ class SolveReporter:
             starts = strategy.get("starts") or []
             if len(starts) > 1:  # several starts (solver.strategy): their steps together
                 table.add_row("starts solved", f"{len(starts)} ({strategy.get('kept')} kept)")
-                table.add_row("  ε steps of all starts", f"{len(steps)} (ε reached {solution.eps:g})")
+                table.add_row("  Ipopt solves of all starts", f"{len(steps)} (ε steps; ε reached {solution.eps:g})")
             else:
-                table.add_row("homotopy: ε steps", f"{len(steps)} (ε reached {solution.eps:g})")
+                table.add_row("Ipopt solves", f"{len(steps)} (ε steps; ε reached {solution.eps:g})")
             iterations = sum(x.iterations for x in steps)
             table.add_row("  Ipopt iterations", f"{iterations} (first step {steps[0].iterations})")
             table.add_row("  time of the ε steps", f"{s['solve_time_s']:.3f} s (first step {steps[0].time_s:.3f} s)")
@@ -136,12 +136,12 @@ class SolveReporter:
         if not steps:
             table.add_row("  time", f"{total:.3f} s")
             return
-        folds = ", ".join(f"{f:.3g}" for f in indirect["folds"]) or "none"
+        folds = ("folds at ε = " + ", ".join(f"{f:.3g}" for f in indirect["folds"])) if indirect["folds"] else "no fold"
         rejected = sum(r.get("rejected_steps", 0) for r in steps)
         table.add_row(
             "  continuation in ε",
             f"{len(steps)} ε steps taken as {indirect['arclength_steps']} arclength steps ({rejected} rejected); "
-            f"{indirect['newton_iterations']} Newton iterations; folds at ε = {folds}",
+            f"{indirect['newton_iterations']} Newton iterations; {folds}",
         )
         table.add_row(
             "  time",

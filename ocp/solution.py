@@ -274,6 +274,25 @@ class Solution:
             "intervals (--intervals) before trusting J or the choice between starts"
         )
 
+    def strategy_warning(self) -> str | None:
+        """Why the plan is not the continuation's when ``solver.strategy: homotopy`` asked for it (else None).
+
+        With a budget the strategy falls back to the cold solve when the continuation would cost more than
+        ``budget`` × the cold solve's iterations or fails (docs/theory/direct.md §5.6): documented, but a user who
+        asked for the paper's method is told which plan they got and how to get the other.
+        """
+        strategy = self.stats.get("strategy") or {}
+        if strategy.get("strategy") != "homotopy" or strategy.get("kept") in (None, "homotopy"):
+            return None
+        run = next((s for s in strategy.get("starts", []) if s.get("start") == "homotopy"), None)
+        if run is None:
+            return None
+        why = (f"spent its budget of {strategy.get('homotopy_budget')} iterations (solver.homotopy.budget × the cold "
+               "solve's; null lets it finish)" if run.get("status") == "budget spent" else
+               f"ended with {run.get('status')}")  # fmt: skip
+        return (f"strategy homotopy: the continuation stopped at ε = {run.get('eps_reached'):g} when it {why}; "
+                f"the {strategy.get('kept')} solve's plan is kept")  # fmt: skip
+
     @property
     def baseline_feasible(self) -> bool:
         """Whether the no-control baseline satisfies the problem's constraints (else no improvement is quoted)."""
@@ -319,7 +338,7 @@ class Solution:
             "solver": self.problem.solver.model_dump(mode="json"),
             "worse_than_baseline": self.worse_than_baseline,
         }
-        warnings = [w for w in (self.plan_warning(),) if w]
+        warnings = [w for w in (self.plan_warning(), self.strategy_warning()) if w]
         if self.worse_than_baseline:
             warnings.append(
                 f"the optimum found (J = {self.cost:.6g}) costs more than not moving (no-control baseline "

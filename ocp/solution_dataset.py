@@ -138,7 +138,8 @@ def solution_content(solution: Any) -> DatasetContent:
         "stats_json": json.dumps(to_jsonable(s.stats)),
         "method": s.method, "status": s.status.value, "message": s.message, "eps": s.eps,
         "collocation_json": json.dumps(s.collocation),
-        "terminal_cost": s.terminal_cost, "running_cost": s.running_cost, "control_energy": s.control_energy,
+        "cost": s.cost, "terminal_cost": s.terminal_cost, "running_cost": s.running_cost,
+        "control_energy": s.control_energy,
     }  # fmt: skip
     content = DatasetContent(attrs=attrs)
     system = s.problem.units.system()

@@ -65,7 +65,7 @@ def test_solve_writes_the_contract(tmp_path, capsys):
     # the table counts the starts and names the kept one (the ε steps are those of all the starts)
     starts = len(summary["strategy"]["starts"])
     assert re.search(rf"starts solved\s*│\s*{starts} \({kept} kept\)", stdout)
-    assert re.search(rf"ε steps of all starts\s*│\s*{len(summary['homotopy'])} \(ε reached 1\)", stdout)
+    assert re.search(rf"Ipopt solves of all starts\s*│\s*{len(summary['homotopy'])} \(ε steps; ε reached 1\)", stdout)
     assert not list(out.glob(".*.tmp"))
 
 

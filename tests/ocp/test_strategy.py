@@ -138,3 +138,22 @@ def test_a_kept_start_that_never_failed_on_its_own_says_why_it_did_not_converge(
         "no start converged at ε = 1: homotopy stopped at ε = 0 (its iteration budget was used up); "
         "the last failure: Ipopt returned Maximum_WallTime_Exceeded at ε = 1 (cold)"
     )
+
+
+def test_a_continuation_cut_by_its_budget_is_reported_when_homotopy_was_asked_for():
+    # strategy homotopy with the default budget (1.5 × the cold solve's iterations) falls back to the cold solve
+    # when the 21-step continuation costs more (K = 40: stopped before its first step); the user is told
+    import mobisense as ms
+
+    def solved(budget):
+        data = hussein2008(collocation={"intervals": 40}, strategy="homotopy",
+                           homotopy={"mode": "fixed", "step": 0.05, "budget": budget})  # fmt: skip
+        return ms.solve(ms.Problem.from_dict(data))
+
+    cut = solved(1.5)
+    assert cut.stats["strategy"]["kept"] == "cold"
+    warning = cut.summary()["warning"]
+    assert warning.startswith("strategy homotopy: the continuation stopped at ε = ")
+    assert "spent its budget of" in warning and "the cold solve's plan is kept" in warning
+    free = solved(None)  # no budget: the continuation runs to ε = 1 and is kept, nothing to say
+    assert free.stats["strategy"]["kept"] == "homotopy" and "warning" not in free.summary()
