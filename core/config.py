@@ -74,7 +74,7 @@ def _finite(value: float) -> float:
         raise ValueError(f"expected a finite number, got {brief(value)}")
     if value != 0 and not MIN_MAGNITUDE <= abs(value) <= MAX_MAGNITUDE:
         raise ValueError(
-            f"expected 0 or a magnitude in [{MIN_MAGNITUDE:g}, {MAX_MAGNITUDE:g}], got {value:g} "
+            f"expected a magnitude in [{MIN_MAGNITUDE:g}, {MAX_MAGNITUDE:g}] (or 0 where allowed), got {value:g} "
             "(products of such numbers overflow or underflow; change the units)"
         )
     return float(value)

@@ -135,6 +135,8 @@ def _simulate(args: argparse.Namespace, kind: str, run: Callable[[Any], Any]) ->
         with numerical_failures(f"writing the results of {source}"):
             result.save(folder.path, figures=not args.no_plot)
         result.report(folder.path)
+    if result.summary.get("warning"):
+        print(f"mobisense: warning: {result.summary['warning']}", file=sys.stderr)
     status = result.summary.get("status", "ok")
     if status != "ok":
         print(f"mobisense: {status}", file=sys.stderr)

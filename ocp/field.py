@@ -24,7 +24,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from ..core.config import InvalidValue, PositiveFloat, StrictModel
+from ..core.config import MAX_MAGNITUDE, MIN_MAGNITUDE, InvalidValue, PositiveFloat, StrictModel
 
 __all__ = [
     "ShootingOptions","MAX_FIELD_STATES", "MAX_SUBSTEPS", "FieldKernel", "FieldSpec", "FieldProcess",
@@ -140,6 +140,10 @@ class FieldSpec(StrictModel):
         for axis, (lo, hi) in zip("xy", self.extent, strict=True):
             if not (np.isfinite(lo) and np.isfinite(hi) and hi > lo):
                 raise InvalidValue("extent", f"expected finite {axis}_max > {axis}_min, got [{lo:g}, {hi:g}]")
+            if not MIN_MAGNITUDE <= hi - lo <= MAX_MAGNITUDE or max(abs(lo), abs(hi)) > MAX_MAGNITUDE:
+                raise InvalidValue("extent", f"expected {axis} bounds and a width within [{MIN_MAGNITUDE:g}, "
+                                   f"{MAX_MAGNITUDE:g}], got [{lo:g}, {hi:g}] (distances would overflow; change "
+                                   "the length unit)")  # fmt: skip
         return self
 
     @property

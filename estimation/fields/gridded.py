@@ -176,6 +176,8 @@ def _load(
         if set(data.dims) != {x, y} or data.ndim != 2:
             others = [_name(d) for d in data.dims if d not in (x, y)]
             hint = f"; select the other dimensions, e.g. select: {{{others[0]}: 0}}" if others else ""
+            if data.ndim == 2 and len(others) == 2:  # two dimensions, named otherwise: name them as x and y
+                hint = f"; its two dimensions are named otherwise: set x: {others[1]} and y: {others[0]} (or reversed)"
             raise ValueError(
                 f"variable: {shown} has dimensions ({_dims(data.dims)}) after selecting {brief(select)}; expected "
                 f"({_name(y)}, {_name(x)}) (the parameters x and y name its coordinates){hint}"

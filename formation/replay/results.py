@@ -155,6 +155,19 @@ def replay_summary(ds: Any, record: ReplayRecord, system: ReplaySystem) -> dict[
             reference_tracking_final=float(ds["reference_error"].values[-1]),
         )
     summary.update({k: v for k, v in record.meta.items() if k not in ("wall_time_s", "steps")})
+    bounds = getattr(system.field, "bounds", None)  # a gridded field: its data cover only this rectangle
+    if bounds is not None:
+        (x0, x1), (y0, y1) = bounds
+        r = np.asarray(record.r, float)
+        outside = (r[..., 0] < x0) | (r[..., 0] > x1) | (r[..., 1] < y0) | (r[..., 1] > y1)
+        summary["outside_field_data"] = float(outside.mean())
+        if outside.any():
+            first = float(np.asarray(record.t)[np.argmax(outside.any(axis=1))])
+            summary["warning"] = (
+                f"the platforms left the gridded field's data [{x0:g}, {x1:g}] × [{y0:g}, {y1:g}] in "
+                f"{100 * outside.mean():.3g} % of their samples (first at t = {first:g}): the field's values there "
+                "are the spline's extrapolation, not data"
+            )
     return summary
 
 

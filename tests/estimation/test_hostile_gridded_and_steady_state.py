@@ -152,6 +152,27 @@ def test_cli_resolves_a_gridded_path_against_the_scenario_folder(tmp_path: Path,
     assert cli.main(["validate", str(scenario.relative_to(tmp_path))]) == 0, capsys.readouterr().err
 
 
+def test_a_replay_off_the_gridded_data_says_so(tmp_path: Path, capsys) -> None:
+    # the spline extrapolates outside its grid: a run whose platforms leave the data is warned about, not trusted
+    folder = tmp_path / "scenarios"
+    folder.mkdir()
+    _grid(folder / "grid.nc")
+    inside = _replay(folder, {"kind": "gridded", "path": "grid.nc"}, "inside.yaml")
+    assert cli.main(["replay", str(inside), "--out", str(tmp_path / "in"), "--no-plot"]) == 0
+    summary = json.loads((tmp_path / "in" / "summary.json").read_text())
+    assert summary["outside_field_data"] == 0.0 and "warning" not in summary
+    capsys.readouterr()
+    data = yaml.safe_load(inside.read_text())
+    data["platforms"]["initial"]["center"] = [30.0, 0.0]  # 20 L east of the grid's x ≤ 10
+    away = folder / "away.yaml"
+    away.write_text(yaml.safe_dump(data))
+    assert cli.main(["replay", str(away), "--out", str(tmp_path / "away"), "--no-plot"]) == 0
+    summary = json.loads((tmp_path / "away" / "summary.json").read_text())
+    assert summary["outside_field_data"] > 0.9
+    assert summary["warning"].startswith("the platforms left the gridded field's data [-10, 10] × [-7, 7]")
+    assert "mobisense: warning: the platforms left the gridded field's data" in capsys.readouterr().err
+
+
 # ------------------------------------------------------------------------------------------- steady state
 
 
