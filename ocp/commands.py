@@ -236,7 +236,7 @@ def check_problem(data: dict[str, Any], path: Path, kind: str = "problem") -> st
     return (
         f"optimal-control problem {problem.name!r}: {_count(problem.n, 'process state')}, "
         f"{_count(problem.N, 'sensor')}, "
-        f"t in [{problem.horizon.t0:g}, {problem.horizon.tf:g}] {u.time}, {problem.solver.method} method "
+        f"t in [{problem.horizon.t0:.10g}, {problem.horizon.tf:.10g}] {u.time}, {problem.solver.method} method "
         f"({grid}), problem hash {problem.digest()}"
     )
 
