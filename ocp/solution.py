@@ -339,6 +339,10 @@ class Solution:
             "worse_than_baseline": self.worse_than_baseline,
         }
         warnings = [w for w in (self.plan_warning(), self.strategy_warning()) if w]
+        smallest = self.min_sigma_eigenvalue
+        if smallest <= 0:  # a covariance that is not one: the grid or the solve did not follow the Riccati flow
+            warnings.append(f"Σ(t) is not positive definite (smallest eigenvalue {smallest:.3g}): the covariance "
+                            "is not resolved; solve on more intervals")  # fmt: skip
         if self.worse_than_baseline:
             warnings.append(
                 f"the optimum found (J = {self.cost:.6g}) costs more than not moving (no-control baseline "

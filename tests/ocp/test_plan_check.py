@@ -66,3 +66,5 @@ def test_an_unresolved_plan_is_reported_with_the_cost_of_what_it_flies():
     assert abs(check["relative_difference"]) > 1e-3  # … and it is not the optimiser's J
     warning = solution.summary()["warning"]
     assert "the grid does not resolve this plan" in warning and "more than K = 25 intervals" in warning
+    # the collocation's Σ even dips below zero on this grid (−2e-6 measured), which is said too
+    assert solution.min_sigma_eigenvalue < 0 and "Σ(t) is not positive definite" in warning
