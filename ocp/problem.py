@@ -261,6 +261,9 @@ class Problem(StrictModel):
                     f"expected no path constraints with solver.method {self.solver.method!r}: the indirect "
                     "method has no state-constrained arcs; remove constraints or use method 'direct'",
                 )
+            if self.constraints.min_separation is not None and len(self.sensors) < 2:
+                raise InvalidValue("constraints.min_separation", "expected at least two sensors to keep apart, "
+                                   "got one (remove the key)")  # fmt: skip
             check_initial_state(self.constraints, [s.p0 for s in self.sensors], [s.v0 for s in self.sensors])
             ends = [(None, None) if s.terminal is None else (s.terminal.p, s.terminal.v) for s in self.sensors]
             check_terminal_states(self.constraints, ends)

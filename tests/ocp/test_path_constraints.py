@@ -57,6 +57,7 @@ def test_resimulation_is_exact_for_a_constant_control() -> None:
         ({"constraints": {"keep_out": [{"center": [1.0, 1.0]}]}}, "constraints.keep_out[0].radius: required key"),
         ({"constraints": {"keep_out": [{"center": [10.0, 10.0], "radius": 1.0}]}}, "sensors[0].p0"),
         ({"constraints": {"max_speed": 1.0}}, "sensors[0].v0"),
+        ({"constraints": {"min_separation": 1.0}}, "constraints.min_separation: expected at least two sensors"),
         # fixed end states no path can reach: refused when read (Ipopt blamed a continuity row, exit 1)
         ({"constraints": {"keep_out": [{"center": [2.0, -2.0], "radius": 1.0}]}, "terminal": {"p": [2.0, -2.0]}},
          "sensors[0].terminal.p: expected a terminal position satisfying constraints.keep_out[0]"),
