@@ -20,7 +20,13 @@ import numpy as np
 
 from .registries import SCHEMES
 
-__all__ = ["CollocationScheme"]
+__all__ = ["CollocationScheme", "HULL_ELEVATION"]
+
+#: degrees by which the control polynomial's Bernstein form is elevated for the bound |u| ≤ u_max (see
+#: ``CollocationScheme.bernstein``): more coefficients, a tighter hull. Measured on terminal_and_bound.yaml at
+#: K = 100, J above its K → ∞ value by 1.8e-6 relative at 0, 1.1e-6 at 2, 8e-7 at 8 (the hull tightens as
+#: 1/degree): not worth the rows
+HULL_ELEVATION = 0
 
 @dataclass(frozen=True)
 class CollocationScheme:
@@ -32,7 +38,7 @@ class CollocationScheme:
     D: np.ndarray = field(init=False)  # (d+1, d) derivative of basis j at collocation node r
     E: np.ndarray = field(init=False)  # (d+1,) basis at tau = 1 (end of interval)
     W: np.ndarray = field(init=False)  # (d,) quadrature weights on the collocation nodes
-    #: (d, d) row i: the i-th Bernstein coefficient of the control polynomial from its d node values
+    #: (d + HULL_ELEVATION, d) row i: the i-th Bernstein coefficient of the control polynomial from its node values
     bernstein: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
@@ -56,7 +62,7 @@ class CollocationScheme:
                     basis *= np.poly1d([1.0, -tau[r + 1]]) / (tau[j + 1] - tau[r + 1])
             antiderivative = np.polyint(basis)
             W[j] = antiderivative(1.0) - antiderivative(0.0)
-        object.__setattr__(self, "bernstein", _bernstein_from_nodes(tau[1:]))
+        object.__setattr__(self, "bernstein", _bernstein_from_nodes(tau[1:], HULL_ELEVATION))
         object.__setattr__(self, "tau", tau)
         object.__setattr__(self, "D", D)
         object.__setattr__(self, "E", E)
@@ -111,17 +117,19 @@ class CollocationScheme:
         return out
 
 
-def _bernstein_from_nodes(nodes: np.ndarray) -> np.ndarray:
-    """The matrix B (d, d) with ``c = B u``: Bernstein coefficients on [0, 1] of the polynomial through ``(nodes, u)``.
+def _bernstein_from_nodes(nodes: np.ndarray, elevation: int = 0) -> np.ndarray:
+    """The matrix B (d + e, d) with ``c = B u``: the Bernstein coefficients of the polynomial through ``(nodes, u)``.
 
-    The polynomial of degree m = d − 1 is ``Σ_i c_i C(m, i) τ^i (1 − τ)^(m−i)``: a convex combination of the
-    ``c_i`` at every τ ∈ [0, 1], so a vector polynomial stays in their convex hull, and ``|c_i| ≤ u_max`` for all
-    i bounds ``|u(τ)|`` on the whole interval. From the monomial coefficients a_k: c_i = Σ_{k≤i} C(i,k)/C(m,k) a_k.
+    The polynomial, of degree d − 1, written in the Bernstein basis of degree m = d − 1 + e (``elevation`` e ≥ 0),
+    is ``Σ_i c_i C(m, i) τ^i (1 − τ)^(m−i)``: a convex combination of the ``c_i`` at every τ ∈ [0, 1], so a vector
+    polynomial stays in their convex hull, and ``|c_i| ≤ u_max`` for all i bounds ``|u(τ)|`` on the whole
+    interval. The hull shrinks onto the curve as the degree is elevated (c_i → u(i/m)). From the monomial
+    coefficients a_k: c_i = Σ_{k≤i} C(i,k)/C(m,k) a_k.
     """
     from math import comb
 
     d = len(nodes)
-    m = d - 1
+    m = d - 1 + elevation
     monomial = np.linalg.inv(np.vander(nodes, d, increasing=True))  # a = monomial @ u
-    to_bernstein = np.array([[comb(i, k) / comb(m, k) if k <= i else 0.0 for k in range(d)] for i in range(d)])
+    to_bernstein = np.array([[comb(i, k) / comb(m, k) if k <= i else 0.0 for k in range(d)] for i in range(m + 1)])
     return to_bernstein @ monomial

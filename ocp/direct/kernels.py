@@ -98,7 +98,7 @@ class IntervalKernels:
         self.short_next = layout == "eliminated" and colloc.ends_at_node
         self.nn = self.ny if self.short_next else self.nx
         self.na = self.nx + self.nz + self.nn
-        self.n_gap, self.n_path, self.n_bound = self.nn, self.d * self.ns, self.d * self.nb
+        self.n_gap, self.n_path, self.n_bound = self.nn, self.d * self.ns, len(colloc.bernstein) * self.nb
         #: path-constraint rows g(x_r, P) ≤ 0 at the d nodes (docs/theory/path_constraints.md §2), last
         self.n_cons = self.d * model.n_path_rows
         self.nr = self.n_gap + self.n_path + self.n_bound + self.n_cons
@@ -169,9 +169,8 @@ class IntervalKernels:
             L = m.running(nodes.x[r], nodes.u[r], P)
             quad += h * c.W[r] * L[0]
             energy += h * c.W[r] * L[1]
-            # |u| ≤ u_max on the Bernstein coefficients: the bound holds on the whole interval (path_constraints.md)
-            hull = sum(c.bernstein[r, j] * nodes.u[j] for j in range(d))
-            bounds.append(m.control_bounds(hull, P)[0])
+        for weights in c.bernstein:  # |u| ≤ u_max on the Bernstein coefficients: on the whole interval
+            bounds.append(m.control_bounds(sum(w * nodes.u[j] for j, w in enumerate(weights)), P)[0])
         cons = [m.path(nodes.x[r], P) for r in range(d)] if self.n_cons else []
         y_end_scaled = nodes.y_end / x_scale[ns:]
         nxt = a[self.nx + self.nz :]

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..collocation import HULL_ELEVATION
 from ..model import Structure
 
 __all__ = ["TranscriptionSize", "transcription_size"]
@@ -44,13 +45,15 @@ def transcription_size(structure: Structure, degree: int, intervals: int, scheme
     terminal = 2 * (sum(s.fixed_position) + sum(s.fixed_velocity))
     handed_on = 4 * N if scheme == "radau" else nx
     variables = K * (d * ns + d * nu + handed_on)
-    constraints = K * (handed_on + d * ns + d * bounded) + terminal
+    hull = d + HULL_ELEVATION  # bound rows per bounded sensor and interval (Bernstein coefficients of its control)
+    constraints = K * (handed_on + d * ns + hull * bounded) + terminal
     # the sensors are condensed (eq. direct.11): a position at a node is a function of the interval's handed-on
     # (p, v) and all d controls, m = 4 + 2d values per sensor. A covariance residual depends on its entry at the
     # d + 1 values of the interval, a row and a column of Σ, and those m values of every sensor; a handed-on row on
-    # its d + 1 values and its own variable (+ one for the velocity coupling); a bound row on one node's control
+    # its d + 1 values and its own variable (+ one for the velocity coupling); a bound row on the sensor's d controls
     m = 4 + 2 * d
-    jacobian = nodes * ns * (d + 1 + 2 * n + N * m) + K * handed_on * (d + 3) + 2 * nodes * bounded + 2 * terminal
+    jacobian = (nodes * ns * (d + 1 + 2 * n + N * m) + K * handed_on * (d + 3) + K * hull * bounded * 2 * d
+                + 2 * terminal)
     # Σ S(p) Σ couples the covariance entries of a node; each sensor's m values couple with each other and with
     # every covariance entry at the d nodes (lower triangle)
     hessian = K * (N * (m * (m + 1) // 2 + d * ns * m) + d * ns * (ns + 1) // 2)

@@ -99,8 +99,9 @@ def constraint_report(problem: Problem, tr: Any, result: Any, P: np.ndarray, u: 
     out: dict[str, Any] = {}
 
     def block(values: np.ndarray, first: int, count: int) -> np.ndarray:
-        """The rows ``first … first + count`` of every interval, as (K·d, count / d)."""
-        return values[: K * k.nr].reshape(K, k.nr)[:, first : first + count].reshape(K * d, -1)
+        """The rows ``first … first + count`` of every interval, as (K·d, count / d) (path rows: one per node)."""
+        rows = values[: K * k.nr].reshape(K, k.nr)[:, first : first + count]
+        return rows.reshape(K * d, -1) if count % d == 0 else rows
 
     def rows_of(first: int, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Scaled rows, NLP multipliers and multipliers per physical unit of those rows."""

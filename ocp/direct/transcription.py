@@ -426,9 +426,11 @@ class DirectCollocation:
             labels += [(f"continuity of {name}", float(starts[j + 1])) for name in state[-k.nn :]]
             for r in range(d):
                 labels += [(f"dynamics of {name} (collocation)", float(nodes[j, r])) for name in state[: k.ns]]
-            for r in range(d):  # on the Bernstein coefficients of the interval's control (dated at node r)
-                labels += [(f"|u| ≤ u_max of sensor {sensor_names[i]} (Bernstein coefficient {r + 1})",
-                            float(nodes[j, r])) for i in bounded]  # fmt: skip
+            hull = len(self.colloc.bernstein)  # Bernstein coefficient r sits at τ = r / (hull − 1)
+            for r in range(hull):
+                at = float(starts[j] + (starts[j + 1] - starts[j]) * r / max(hull - 1, 1))
+                labels += [(f"|u| ≤ u_max of sensor {sensor_names[i]} (Bernstein coefficient {r + 1})", at)
+                           for i in bounded]  # fmt: skip
             for r in range(d):
                 labels += [(what.format(*sensor_names), float(nodes[j, r])) for _, what in self.model.path_labels]
         labels += [(f"{kind} of sensor {sensor_names[i]}", float(starts[-1])) for kind, i in k.terminal_labels]
