@@ -70,7 +70,7 @@ def solve_shooting(
     if init is not None and init.problem.N == problem.N:
         w = fine.controls_to_w(init.t_u, init.u, cost_scale)
     else:
-        start = StartKind.CONTINUATION.value  # on the coarse grid
+        start = StartKind.COARSE.value
         t_coarse = time.perf_counter()
         coarse = FieldShooting(problem, o.coarse_intervals, scaling="energy", max_h_lambda=2.0)
         wc = np.zeros(coarse.nw)

@@ -45,6 +45,7 @@ class StartKind(str, Enum):
     WARM = "warm start from init"
     WARM_FAILED = "warm start from init failed; from coasting (solver.strategy)"
     GUESS = "initial guess, ε = 1 directly"
+    COARSE = "ε-homotopy on the coarse grid (solver.shooting)"
     INIT_WITHOUT_POINT = "init ignored: it carries no converged ε = 1 NLP point"
     INIT_OTHER_LAYOUT = "init ignored: different structure or grid"
 

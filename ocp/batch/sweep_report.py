@@ -80,7 +80,8 @@ def sweep_summary(spec: SweepSpec, tasks: list[SweepTask], rows: list[dict[str, 
     solved = [r for r in rows if r["status"] == "solved"]
     best = min(solved, key=lambda r: r["cost"]) if solved else None
     warm = [r for r in solved if r.get("start") == StartKind.WARM.value]
-    cold = [r for r in solved if r.get("start") in (StartKind.CONTINUATION.value, StartKind.WARM_FAILED.value)]
+    cold_starts = (StartKind.CONTINUATION.value, StartKind.WARM_FAILED.value, StartKind.COARSE.value)
+    cold = [r for r in solved if r.get("start") in cold_starts]
     return {
         "mode": spec.mode,
         "vary": list(spec.vary),
