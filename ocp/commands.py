@@ -111,6 +111,9 @@ def _solve(args: argparse.Namespace, figures: Any) -> int:
     check_command_kind(data, source, ("problem",))  # a formation, sweep, … file: the command that runs it
     data = apply_overrides(data, args)
     problem = Problem.from_dict(data, source=source)  # ConfigError -> exit 2, nothing written
+    if problem.solver.method == "shooting" and (args.degree is not None or args.scheme is not None):
+        raise ConfigError(f"{source}: --degree/--scheme: the shooting method has no collocation polynomials (its grid "
+                          "is solver.shooting: --intervals sets K)")  # fmt: skip
     cluster = Cluster.from_args(args)
     if args.multistart is None and (cluster.scheduler or cluster.workers):
         raise ConfigError(f"{source}: --workers/--scheduler: only used with --multistart")
@@ -214,7 +217,12 @@ def apply_overrides(data: dict[str, Any], args: argparse.Namespace) -> dict[str,
     if "intervals" in collocation and solver.get("method", "shooting" if field else "direct") == "shooting":
         shooting = solver.setdefault("shooting", {})  # the grid this method solves on (no collocation)
         if isinstance(shooting, dict):
-            shooting["intervals"] = collocation.pop("intervals")
+            from .field import ShootingOptions
+
+            shooting["intervals"] = K = collocation.pop("intervals")
+            coarse = shooting.get("coarse_intervals", ShootingOptions.model_fields["coarse_intervals"].default)
+            if isinstance(K, int) and isinstance(coarse, int) and K < coarse:  # the homotopy's grid no finer
+                shooting["coarse_intervals"] = max(K, 2)
     if collocation:
         solver.setdefault("collocation", {}).update(collocation)
     homotopy = {k: v for k, v in (("mode", args.homotopy), ("step", args.step)) if v is not None}

@@ -24,6 +24,7 @@ import numpy as np
 from pydantic import Discriminator, Field, Tag, model_validator
 
 from ..core.config import FiniteFloat, InvalidValue, PositiveFloat, StrictModel, Vector2
+from ..core.errors import brief
 
 __all__ = [
     "KeepOutDisc",
@@ -56,10 +57,12 @@ class KeepOutDisc(StrictModel):
 class KeepOutPolygon(StrictModel):
     """A convex polygon (vertices in order, either orientation) the sensors must stay out of."""
 
-    polygon: list[Vector2] = Field(min_length=3)
+    polygon: list[Vector2] = Field(json_schema_extra={"minItems": 3})  # checked in _convex, with its message
 
     @model_validator(mode="after")
     def _convex(self) -> KeepOutPolygon:
+        if len(self.polygon) < 3:
+            raise InvalidValue("polygon", f"expected at least 3 vertices, got {len(self.polygon)}")
         V = np.asarray(self.polygon, float)
         e = np.roll(V, -1, axis=0) - V
         cross = e[:, 0] * np.roll(e, -1, axis=0)[:, 1] - e[:, 1] * np.roll(e, -1, axis=0)[:, 0]
@@ -116,6 +119,19 @@ class PathConstraints(StrictModel):
     min_separation: PositiveFloat | None = Field(None, description="smallest distance between two sensors (L)")
     max_speed: PositiveFloat | None = Field(None, description="largest sensor speed |v_i| (L/T)")
     workspace: Workspace | None = None
+
+    @model_validator(mode="before")
+    @classmethod
+    def _zone_shapes(cls, data: Any) -> Any:
+        """Each zone is a mapping of a disc's keys or a polygon's, not both and nothing else."""
+        zones = data.get("keep_out") if isinstance(data, dict) else None
+        for k, zone in enumerate(zones if isinstance(zones, list) else []):
+            expected = "a disc {center: [x, y], radius: r} or a convex polygon {polygon: [[x, y], …]}"
+            if not isinstance(zone, dict):
+                raise InvalidValue(f"keep_out[{k}]", f"expected {expected}, got {brief(zone)}")
+            if "polygon" in zone and ({"center", "radius"} & set(zone)):
+                raise InvalidValue(f"keep_out[{k}]", f"expected {expected}, got both kinds' keys: {sorted(zone)}")
+        return data
 
 
 # ---------------------------------------------------------------------- structure and parameters

@@ -239,7 +239,8 @@ def _plan_integrator(model: SensorKalmanModel, nodes: tuple[float, ...], interva
     if steps:
         F = ca.integrator("plan_interval", "rk", dae, 0.0, 1.0, {**quiet, "number_of_finite_elements": steps})
     else:
-        options = {**quiet, "abstol": 1e-11, "reltol": 1e-11, "disable_internal_warnings": True}
+        options = {**quiet, "abstol": 1e-11, "reltol": 1e-11, "disable_internal_warnings": True,
+                   "quad_err_con": True}  # J is a quadrature: its error controls the steps too
         F = ca.integrator("plan_interval", "cvodes", dae, 0.0, 1.0, options)
     x0 = ca.MX.sym("x0", s.nx)
     pk = ca.MX.sym("p", model.layout.size + 1 + d * s.nu)

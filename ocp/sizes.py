@@ -91,10 +91,12 @@ def shooting_estimate(problem: Problem) -> Estimate:
                                         o.intervals)  # fmt: skip
     what = (f"the shooting NLP (n = {n} field states, N = {problem.N} sensors, K = {o.intervals} intervals of m = {m} "
             "RK4 substeps)")  # fmt: skip
-    return Estimate(what, shooting_memory_bytes(n, o.intervals, m),
-                    "use a coarser grid (process.field.grid) or a shorter horizon; memory grows with n² K·m, and "
-                    "K·m with the horizon times the field's fastest rate (docs/theory/field.md §3.3), not with K",
-                    shooting_seconds(n, o.intervals, m))  # fmt: skip
+    if m == 1:  # one substep per interval: K itself sets K·m
+        hint = "use fewer intervals (solver.shooting.intervals, --intervals) or a coarser grid (process.field.grid)"
+    else:
+        hint = ("use a coarser grid (process.field.grid) or a shorter horizon; memory grows with n² K·m, and K·m "
+                "with the horizon times the field's fastest rate (docs/theory/field.md §3.3), not with K")
+    return Estimate(what, shooting_memory_bytes(n, o.intervals, m), hint, shooting_seconds(n, o.intervals, m))
 
 
 def problem_estimates(

@@ -263,6 +263,8 @@ class Solution:
         the collocation; None when it is within the tolerance or was not run.
         """
         check = self.stats.get("plan_check")
+        if check and check.get("cost") is None and self.collocation is not None:
+            return f"the plan check could not re-integrate this plan ({check.get('integrator')}): J is unchecked"
         if not check or check.get("relative_difference") is None or self.collocation is None:
             return None
         difference = check["relative_difference"]
@@ -342,8 +344,9 @@ class Solution:
         warnings = [w for w in (self.plan_warning(), self.strategy_warning()) if w]
         smallest = self.min_sigma_eigenvalue
         if smallest <= 0:  # a covariance that is not one: the grid or the solve did not follow the Riccati flow
-            warnings.append(f"Σ(t) is not positive definite (smallest eigenvalue {smallest:.3g}): the covariance "
-                            "is not resolved; solve on more intervals")  # fmt: skip
+            warnings.append(f"Σ(t) is not positive definite (smallest eigenvalue {smallest:.3g}): not a Kalman "
+                            "filter's covariance — the grid does not resolve it or the optimum is a poor one; try "
+                            "more intervals or --multistart K")  # fmt: skip
         if self.worse_than_baseline:
             warnings.append(
                 f"the optimum found (J = {self.cost:.6g}) costs more than not moving (no-control baseline "

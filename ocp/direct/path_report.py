@@ -21,8 +21,11 @@ from ..problem import Problem
 
 __all__ = ["ACTIVE_TOLERANCE", "resimulate_sensors", "constraint_report"]
 
-#: a group is active when a scaled row is within this of its bound at a node (Ipopt's tol is 1e-9)
+#: a group is active when a scaled row is within this of its bound at a node (Ipopt's tol is 1e-9) …
 ACTIVE_TOLERANCE = 1e-6
+#: … or when a row's multiplier, relative to J's scale (the NLP's objective is J / cost_scale), is at least this:
+#: an inactive row's multiplier is μ / slack ≲ 1e-8 at Ipopt's final μ, a binding one's is what J pays for it
+ACTIVE_MULTIPLIER = 1e-6
 
 
 def resimulate_sensors(
@@ -136,13 +139,13 @@ def constraint_report(problem: Problem, tr: Any, result: Any, P: np.ndarray, u: 
 
 
 def _active(rows: np.ndarray, multipliers: np.ndarray) -> bool:
-    """Whether rows ``g ≤ 0`` are active: one within :data:`ACTIVE_TOLERANCE` of 0, or its multiplier above its slack.
+    """Whether rows ``g ≤ 0`` bind: one within ACTIVE_TOLERANCE of its bound, or a multiplier of ACTIVE_MULTIPLIER.
 
-    At an interior-point solution multiplier × slack ≈ μ for every row: an active row has a multiplier far above
-    its slack, an inactive one the reverse (a binding speed limit kept a slack of 2e-6…9e-6 with a multiplier of
-    4e-4 that the slack test alone missed). Both in NLP units.
+    An interior-point optimum keeps every row a little inside its bound (slack × multiplier ≈ μ), so the slack
+    alone misses binding rows: a speed limit that raised J by 1e-3 kept slacks of 2e-6…9e-6. The multiplier is
+    the price J pays for the row (in units of J's scale, the NLP's objective): ≲ 1e-8 for a row well inside.
     """
-    return bool(rows.max() >= -ACTIVE_TOLERANCE or np.any(np.abs(multipliers) > -rows))
+    return bool(rows.max() >= -ACTIVE_TOLERANCE or np.abs(multipliers).max() >= ACTIVE_MULTIPLIER)
 
 
 def _control_report(problem: Problem, tr: Any, u: np.ndarray, rows: np.ndarray, lam_nlp: np.ndarray,

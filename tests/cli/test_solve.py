@@ -175,6 +175,11 @@ def test_intervals_set_the_grid_of_the_method_that_solves():
     field = yaml.safe_load((PROBLEMS / "field_mapping_5x5.yaml").read_text(encoding="utf-8"))
     # a field problem is solved by shooting (its default method): --intervals is the shooting grid's K
     assert apply_overrides(field, args)["solver"]["shooting"]["intervals"] == 30
+    # fewer intervals than the homotopy's coarse grid (25 by default): that grid is no finer than the final one
+    args.intervals = 7
+    shooting = apply_overrides(yaml.safe_load((PROBLEMS / "field_mapping_5x5.yaml").read_text()), args)["solver"]
+    assert shooting["shooting"] == {"intervals": 7, "coarse_intervals": 7}
+    args.intervals = 30
     assert "intervals" not in field["solver"].get("collocation", {})
     collocated = apply_overrides({**field, "solver": {"method": "direct"}}, args)["solver"]
     assert collocated["collocation"]["intervals"] == 30 and "shooting" not in collocated

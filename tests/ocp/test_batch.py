@@ -245,6 +245,8 @@ def test_multistart_reports_optima(tmp_path, capsys):
     assert sum(len(g["starts"]) for g in multistart["optima"]) == multistart["converged"]
     single = solve_direct(Problem.from_dict(small_base()))
     assert summary["cost"] <= single.cost * (1 + 1e-8)  # the best of several starts is never worse
+    # the plan returned is checked as a single solve's is: its J re-integrated (ocp/direct/plan_check.py)
+    assert abs(summary["plan_check"]["cost"] - summary["cost"]) <= 1e-5 * summary["cost"]
 
 
 def test_timed_out_task_is_a_row_with_its_error():

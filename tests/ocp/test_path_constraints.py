@@ -53,8 +53,13 @@ def test_resimulation_is_exact_for_a_constant_control() -> None:
         # a zone is told by its keys: a bad polygon is reported as a polygon, not as a disc missing its centre
         ({"constraints": {"keep_out": [{"polygon": [[0, 0], [2, 0], [0.5, 0.5], [0, 2]]}]}},
          "constraints.keep_out[0].polygon: expected the vertices of a strictly convex polygon"),
-        ({"constraints": {"keep_out": [{"polygon": [[0, 0], [2, 0]]}]}}, "constraints.keep_out[0].polygon: "),
+        ({"constraints": {"keep_out": [{"polygon": [[0, 0], [2, 0]]}]}},
+         "constraints.keep_out[0].polygon: expected at least 3 vertices, got 2"),
         ({"constraints": {"keep_out": [{"center": [1.0, 1.0]}]}}, "constraints.keep_out[0].radius: required key"),
+        ({"constraints": {"keep_out": ["disc"]}}, "constraints.keep_out[0]: expected a disc {center: [x, y], radius: "
+                                                  "r} or a convex polygon {polygon: [[x, y], …]}, got 'disc'"),
+        ({"constraints": {"keep_out": [{"polygon": [[0, 0], [2, 0], [0, 2]], "radius": 1.0}]}},
+         "constraints.keep_out[0]: expected a disc {center: [x, y], radius: r} or a convex polygon"),
         ({"constraints": {"keep_out": [{"center": [10.0, 10.0], "radius": 1.0}]}}, "sensors[0].p0"),
         ({"constraints": {"max_speed": 1.0}}, "sensors[0].v0"),
         ({"constraints": {"min_separation": 1.0}}, "constraints.min_separation: expected at least two sensors"),

@@ -68,3 +68,19 @@ def test_an_unresolved_plan_is_reported_with_the_cost_of_what_it_flies():
     assert "the grid does not resolve this plan" in warning and "more than K = 25 intervals" in warning
     # the collocation's Σ even dips below zero on this grid (−2e-6 measured), which is said too
     assert solution.min_sigma_eigenvalue < 0 and "Σ(t) is not positive definite" in warning
+
+
+def test_a_stiff_plan_is_reintegrated_with_its_quadrature_under_error_control():
+    # Σ0 = 1e6 falling on a time scale of ~1e-10 s with the sensor on the process and K = 10: the explicit steps
+    # disagree and CVODES integrates the plan; without error control on the quadratures its control energy was
+    # 18584 against 17899 exactly (Gauss quadrature of the polynomials), and J 18613 against 17927.87
+    data = hussein2008(collocation={"intervals": 10})
+    data["process"].update(Sigma0=[[1.0e6]], locations=[[0.0, 0.0]])
+    data["sensors"][0].update(p0=[0.0, 0.0], v0=[0.0, 0.0], noise={"model": "quadratic_range", "beta": 5.0,
+                                                                   "gamma": 1.0e-4})  # fmt: skip
+    data["cost"]["K"] = [[1.0]]
+    del data["solver"]["homotopy"]
+    solution = ms.solve(ms.Problem.from_dict(data))
+    check = solution.stats["plan_check"]
+    assert check["integrator"] == "CVODES"
+    assert check["cost"] == pytest.approx(_dop853_cost(solution), rel=1e-6)
