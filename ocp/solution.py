@@ -309,6 +309,7 @@ class Solution:
 
     def summary(self) -> dict[str, Any]:
         """The ``summary.json`` contract (see README)."""
+        smallest = self.min_sigma_eigenvalue  # an eigenvalue problem per state time: computed once
         out: dict[str, Any] = {
             "name": self.problem.name,
             "method": self.method,
@@ -335,14 +336,13 @@ class Solution:
             "baseline_feasible": self.baseline_feasible,
             "baseline_violations": self.problem.coasting_violations(),
             "improvement_percent": self.improvement_percent,
-            "min_sigma_eigenvalue": self.min_sigma_eigenvalue,
-            "sigma_positive_definite": self.min_sigma_eigenvalue > 0,
+            "min_sigma_eigenvalue": smallest,
+            "sigma_positive_definite": smallest > 0,
             "problem_hash": self.problem.digest(),
             "solver": self.problem.solver.model_dump(mode="json"),
             "worse_than_baseline": self.worse_than_baseline,
         }
         warnings = [w for w in (self.plan_warning(), self.strategy_warning()) if w]
-        smallest = self.min_sigma_eigenvalue
         if smallest <= 0:  # a covariance that is not one: the grid or the solve did not follow the Riccati flow
             warnings.append(f"Σ(t) is not positive definite (smallest eigenvalue {smallest:.3g}): not a Kalman "
                             "filter's covariance — the grid does not resolve it or the optimum is a poor one; try "
