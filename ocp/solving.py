@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -47,6 +48,9 @@ def solve(
     if isinstance(problem, Mapping):
         raise TypeError("solve: problem: expected a Problem, a YAML path or an example's name, got a mapping "
                         "(Problem.from_dict validates one)")  # fmt: skip
+    if not isinstance(problem, (Problem, str, os.PathLike)):
+        raise TypeError(f"solve: problem: expected a Problem, a YAML path or an example's name, got "
+                        f"{type(problem).__name__}")  # fmt: skip
     if init is not None and not isinstance(init, Solution):
         raise TypeError(f"solve: init: expected a Solution (of an earlier solve), got {type(init).__name__}")
     if not isinstance(problem, Problem):

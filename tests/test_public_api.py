@@ -53,7 +53,7 @@ PATH_EXPECTED = "expected the path of a YAML file or the name of a shipped examp
     [
         (lambda: solve({"process": {}}), "solve: problem: expected a Problem, a YAML path or an example's name, got a "
                                          "mapping"),
-        (lambda: solve(None), f"{PATH_EXPECTED}, got NoneType"),
+        (lambda: solve(None), "solve: problem: expected a Problem, a YAML path or an example's name, got NoneType"),
         (lambda: mobisense.load_problem(3), f"{PATH_EXPECTED}, got int"),
         (lambda: mobisense.load_scenario(["a"]), f"{PATH_EXPECTED}, got list"),
         (lambda: solve("hussein2008", init="previous.nc"), "solve: init: expected a Solution (of an earlier solve), "
