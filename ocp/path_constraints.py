@@ -361,7 +361,7 @@ def check_terminal_states(constraints: PathConstraints, terminals: list[tuple[An
     ``terminals[i]`` is sensor i's ``(p, v)`` target, either None when free. An end state no path can reach
     otherwise fails in Ipopt as an infeasible problem, blamed on a continuity row.
     """
-    alone = PathConstraints(**{**constraints.model_dump(), "min_separation": None})
+    alone = _without_separation(constraints)
     fixed = []
     for i, (p, v) in enumerate(terminals):
         if p is not None:
@@ -387,11 +387,16 @@ def check_terminal_states(constraints: PathConstraints, terminals: list[tuple[An
 def _offending_sensor(constraints: PathConstraints, name: str, p: np.ndarray, v: np.ndarray) -> int:
     if name == "min_separation":
         return 0
+    single = _without_separation(constraints)
     for i in range(p.shape[0]):
-        single = PathConstraints(**{**constraints.model_dump(), "min_separation": None})
         if margins(single, p[None, i : i + 1], v[None, i : i + 1]).get(name, np.zeros(1))[0] > 0:
             return i
     return 0
+
+
+def _without_separation(constraints: PathConstraints) -> PathConstraints:
+    """The constraints of one sensor alone: ``min_separation`` dropped."""
+    return PathConstraints(**{**constraints.model_dump(), "min_separation": None})
 
 
 def draw_constraints(ax: Any, constraints: PathConstraints | None) -> None:

@@ -137,9 +137,8 @@ def _run(
     try:
         out = F(x0=x0 / x_scale, p=np.concatenate([P, a.ravel(), phase.ravel()]))
     except RuntimeError as exc:
-        status = re.search(r'CVode returned "(\w+)"', str(exc))
         raise RuntimeError(
-            f"integrating the Riccati equation failed (CVODES {status.group(1) if status else 'error'}): "
+            f"integrating the Riccati equation failed (CVODES {_cvodes_status(exc)}): "
             "the covariance dynamics are too stiff or their numbers too extreme; rescale the problem"
         ) from None
     x = np.vstack([x0, np.asarray(out["xf"]).T * x_scale])
@@ -321,6 +320,10 @@ def resimulate_plan(
     try:
         return PlanCheck(run(0), "CVODES")
     except RuntimeError as exc:
-        status = re.search(r'CVode returned "(\w+)"', str(exc))
-        why = status.group(1) if status else "error"
-        raise RuntimeError(f"re-integrating the plan failed (CVODES {why})") from None
+        raise RuntimeError(f"re-integrating the plan failed (CVODES {_cvodes_status(exc)})") from None
+
+
+def _cvodes_status(exc: RuntimeError) -> str:
+    """The CVODES return flag named in a CasADi integrator error (``CV_TOO_MUCH_WORK``, …), or ``error``."""
+    status = re.search(r'CVode returned "(\w+)"', str(exc))
+    return status.group(1) if status else "error"

@@ -9,6 +9,7 @@ and as attributes the normalised problem (YAML), the summary (JSON) and the solv
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
@@ -21,14 +22,10 @@ from ..core.files import to_jsonable, write_json, write_netcdf
 from ..core.netcdf_writer import DatasetContent
 from .problem import Problem
 from .solution_file import brief_error, open_solution_file, read_solution_problem
+from .solution_warnings import solution_warnings
 from .state_layout import StateLayout
 
-__all__ = ["SolveStatus", "StartKind", "HomotopyStep", "TrajectorySample", "Solution", "PLAN_TOLERANCE"]
-
-#: relative difference of the optimiser's J from its plan re-integrated (``stats["plan_check"]``) above which the
-#: grid is reported as not resolving the plan (the discretisation error of a resolved grid is far smaller:
-#: 5e-11 on the default problem at K = 100, 2.2e-7 on coupled_two_sensor at its K = 50)
-PLAN_TOLERANCE = 1e-5
+__all__ = ["SolveStatus", "StartKind", "HomotopyStep", "TrajectorySample", "Solution"]
 
 
 class SolveStatus(str, Enum):
@@ -256,50 +253,15 @@ class Solution:
             and self.baseline_feasible
         )
 
-    def plan_warning(self) -> str | None:
-        """Why J is not to be trusted when the plan check (``stats["plan_check"]``) exceeds :data:`PLAN_TOLERANCE`.
-
-        The check (:func:`mobisense.ocp.direct.plan_check.check_plan`) re-integrates the controls independently of
-        the collocation; None when it is within the tolerance or was not run.
-        """
-        check = self.stats.get("plan_check")
-        if check and check.get("cost") is None and self.collocation is not None:
-            return f"the plan check could not re-integrate this plan ({check.get('integrator')}): J is unchecked"
-        if not check or check.get("relative_difference") is None or self.collocation is None:
-            return None
-        difference = check["relative_difference"]
-        if abs(difference) <= PLAN_TOLERANCE:
-            return None
-        return (
-            f"the grid does not resolve this plan: its controls re-integrated give J = {check['cost']:.8g}, "
-            f"{100 * abs(difference):.3g} % {'below' if difference > 0 else 'above'} the optimiser's (relative "
-            f"difference {difference:+.2g}, beyond ±{PLAN_TOLERANCE:g}); solve on more than K = {self.collocation[2]} "
-            "intervals (--intervals) before trusting J or the choice between starts"
-        )
-
-    def strategy_warning(self) -> str | None:
-        """Why the plan is not the continuation's when ``solver.strategy: homotopy`` asked for it (else None).
-
-        With a budget the strategy falls back to the cold solve when the continuation would cost more than
-        ``budget`` × the cold solve's iterations or fails (docs/theory/direct.md §5.6): documented, but a user who
-        asked for the paper's method is told which plan they got and how to get the other.
-        """
-        strategy = self.stats.get("strategy") or {}
-        if strategy.get("strategy") != "homotopy" or strategy.get("kept") in (None, "homotopy"):
-            return None
-        run = next((s for s in strategy.get("starts", []) if s.get("start") == "homotopy"), None)
-        if run is None:
-            return None
-        why = (f"spent its budget of {strategy.get('homotopy_budget')} iterations (solver.homotopy.budget × the cold "
-               "solve's; null lets it finish)" if run.get("status") == "budget spent" else
-               f"ended with {run.get('status')}")  # fmt: skip
-        return (f"strategy homotopy: the continuation stopped at ε = {run.get('eps_reached'):g} when it {why}; "
-                f"the {strategy.get('kept')} solve's plan is kept")  # fmt: skip
+    @functools.cached_property
+    def baseline_violations(self) -> list[str]:
+        """The constraints the no-control baseline violates (:meth:`Problem.coasting_violations`), computed once."""
+        return self.problem.coasting_violations()
 
     @property
     def baseline_feasible(self) -> bool:
         """Whether the no-control baseline satisfies the problem's constraints (else no improvement is quoted)."""
-        return not self.problem.coasting_violations()
+        return not self.baseline_violations
 
     @property
     def improvement_percent(self) -> float | None:
@@ -334,7 +296,7 @@ class Solution:
             ],
             "baseline": self.baseline,
             "baseline_feasible": self.baseline_feasible,
-            "baseline_violations": self.problem.coasting_violations(),
+            "baseline_violations": self.baseline_violations,
             "improvement_percent": self.improvement_percent,
             "min_sigma_eigenvalue": smallest,
             "sigma_positive_definite": smallest > 0,
@@ -342,16 +304,7 @@ class Solution:
             "solver": self.problem.solver.model_dump(mode="json"),
             "worse_than_baseline": self.worse_than_baseline,
         }
-        warnings = [w for w in (self.plan_warning(), self.strategy_warning()) if w]
-        if smallest <= 0:  # a covariance that is not one: the grid or the solve did not follow the Riccati flow
-            warnings.append(f"Σ(t) is not positive definite (smallest eigenvalue {smallest:.3g}): not a Kalman "
-                            "filter's covariance — the grid does not resolve it or the optimum is a poor one; try "
-                            "more intervals or --multistart K")  # fmt: skip
-        if self.worse_than_baseline:
-            warnings.append(
-                f"the optimum found (J = {self.cost:.6g}) costs more than not moving (no-control baseline "
-                f"J = {self.baseline['cost']:.6g}): a poor local optimum; try --multistart K"
-            )
+        warnings = solution_warnings(self, smallest)
         if warnings:
             out["warning"] = "; and ".join(warnings)
         out.update(self.stats)

@@ -88,6 +88,14 @@ DIMENSIONS: dict[str, tuple[str, ...]] = {
 }  # fmt: skip
 #: coordinates that are not index coordinates: their dimension
 _AUXILIARY = {"state_x": ("state",), "state_y": ("state",)}
+#: the global ``comment`` of a solution, and of a shooting solution (no costates)
+_COMMENT = "Sigma and Lam are full symmetric matrices; costates are those of J (minimisation, H = L + λ'f)"
+_SHOOTING_COMMENT = "Sigma (when stored) is the full symmetric covariance; shooting has no costates"
+#: the time coordinates of a shooting solution, which has no collocation points
+_SHOOTING_TIMES = {
+    "time": "time of the states: the shooting intervals' boundaries",
+    "time_u": "time of the controls (piecewise linear between them): the shooting intervals' boundaries",
+}
 
 
 def variable_attrs(solution: Any, name: str, suffix: str = "") -> dict[str, str]:
@@ -127,7 +135,7 @@ def solution_content(solution: Any) -> DatasetContent:
         arrays.update({f"nlp_{key}": np.asarray(s.nlp[key]) for key in _NLP_DIMS})
     attrs = {
         "title": f"mobisense: solution of problem '{s.problem.name}' by the {s.method} method",
-        "comment": "Sigma and Lam are full symmetric matrices; costates are those of J (minimisation, H = L + λ'f)",
+        "comment": _SHOOTING_COMMENT if s.method == "shooting" else _COMMENT,
         "nlp_signature": "" if s.nlp is None else s.nlp["signature"],
         # a sweep pays this per task: the text of the entries its tasks share is emitted once
         "problem_yaml": dump_mapping(s.problem.normalised()),
@@ -146,12 +154,10 @@ def solution_content(solution: Any) -> DatasetContent:
     for name, values in arrays.items():
         content.add_variable(name, DIMENSIONS[name], values, _attrs(system, name))
     for name, values in coords.items():
-        content.add_coord(name, _AUXILIARY.get(name, (name,)), values, _attrs(system, name))
-    if s.method == "shooting":  # no collocation points, no costates (docs/theory/field.md §3)
-        for name in ("time", "time_u"):
-            what = "states" if name == "time" else "controls (piecewise linear between them)"
-            content.coords[name][2]["long_name"] = f"time of the {what}: the shooting intervals' boundaries"
-        content.attrs["comment"] = "Sigma (when stored) is the full symmetric covariance; shooting has no costates"
+        attrs = _attrs(system, name)
+        if s.method == "shooting" and name in _SHOOTING_TIMES:  # no collocation points (docs/theory/field.md §3)
+            attrs["long_name"] = _SHOOTING_TIMES[name]
+        content.add_coord(name, _AUXILIARY.get(name, (name,)), values, attrs)
     return content
 
 

@@ -45,12 +45,9 @@ def solve(
         ``status`` tells whether ε = 1 was reached; a failed solve keeps what was solved. A solution with
         NaN or infinite values is never ``solved``.
     """
-    if isinstance(problem, Mapping):
-        raise TypeError("solve: problem: expected a Problem, a YAML path or an example's name, got a mapping "
-                        "(Problem.from_dict validates one)")  # fmt: skip
     if not isinstance(problem, (Problem, str, os.PathLike)):
-        raise TypeError(f"solve: problem: expected a Problem, a YAML path or an example's name, got "
-                        f"{type(problem).__name__}")  # fmt: skip
+        got = "a mapping (Problem.from_dict validates one)" if isinstance(problem, Mapping) else type(problem).__name__
+        raise TypeError(f"solve: problem: expected a Problem, a YAML path or an example's name, got {got}")
     if init is not None and not isinstance(init, Solution):
         raise TypeError(f"solve: init: expected a Solution (of an earlier solve), got {type(init).__name__}")
     if not isinstance(problem, Problem):
@@ -60,8 +57,7 @@ def solve(
         raise ConfigError(f"solver.method: {METHODS.unknown(method)}")
     solution = METHODS[method](problem, progress=progress, init=init)
     solution.reject_non_finite()
-    if solution.success and solution.collocation is not None:  # a direct plan: its J checked independently
-        from .direct.plan_check import check_plan
+    from .direct.plan_check import record_plan_check
 
-        solution.stats["plan_check"] = check_plan(solution)
+    record_plan_check(solution)  # a direct plan: its J checked independently
     return solution

@@ -71,8 +71,7 @@ def solve_multistart(
     # the best optimum, represented by its lowest start (start 0, the ordinary solve, when it found it)
     best = solutions[optima[0]["starts"][0]] if optima else done[0]
     best.stats["multistart"] = {"starts": starts, "converged": len(converged), "optima": optima, "errors": errors}
-    if best.success and best.collocation is not None:  # the plan returned, checked as a single solve's is
-        from ..direct.plan_check import check_plan
+    from ..direct.plan_check import record_plan_check
 
-        best.stats["plan_check"] = check_plan(best)
+    record_plan_check(best)  # the plan returned, checked as a single solve's is
     return best

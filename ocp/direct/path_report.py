@@ -91,10 +91,9 @@ def constraint_report(problem: Problem, tr: Any, result: Any, P: np.ndarray, u: 
     -----
     ``max_violation`` is the largest physical violation (penetration depth (L), separation deficit (L),
     speed excess (L/T), distance outside the workspace (L), |u| − u_max (L/T²); ≤ 0 means satisfied with that
-    margin) on the
-    re-simulated path; ``max_multiplier`` the largest multiplier of the group's rows in cost units per unit
-    of the row's physical value (zero when inactive); ``units`` the unit of ``max_violation``, the problem's
-    length (or speed) unit in UDUNITS, as in ``solution.nc``.
+    margin) on the re-simulated path; ``max_multiplier`` the largest multiplier of the group's rows in cost units
+    per unit of the row's physical value (zero when inactive); ``units`` the unit of ``max_violation``, the
+    problem's length (or speed) unit in UDUNITS, as in ``solution.nc``.
     """
     k, K, d = tr.kernels, tr.intervals, tr.colloc.degree
     system = problem.units.system()  # the problem's declared units, as in solution.nc (UDUNITS)
@@ -151,12 +150,9 @@ def _active(rows: np.ndarray, multipliers: np.ndarray) -> bool:
 def _control_report(problem: Problem, tr: Any, u: np.ndarray, rows: np.ndarray, lam_nlp: np.ndarray,
                     lam: np.ndarray, units: str) -> dict[str, Any]:  # fmt: skip
     """The ``u_max`` entry: |u(t)| − u_max of the bounded sensors between the nodes, activity, multipliers."""
-    K, d = tr.intervals, tr.colloc.degree
+    K = tr.intervals
     s = np.linspace(0.0, 1.0, 21)  # from the interval's start (the right limit there) to its end
-    tau = tr.colloc.tau[1:]
-    basis = np.array([[np.prod([(x - tau[r]) / (tau[j] - tau[r]) for r in range(d) if r != j]) for x in s]
-                      for j in range(d)])  # fmt: skip
-    samples = np.einsum("js,kjnc->ksnc", basis, u)  # (K, S, N, 2)
+    samples = np.einsum("sj,kjnc->ksnc", tr.colloc.interpolation_matrix(s), u)  # (K, S, N, 2)
     bounded = [i for i, sensor in enumerate(problem.sensors) if sensor.u_max is not None]
     u_max = np.array([problem.sensors[i].u_max for i in bounded])
     excess = np.linalg.norm(samples[:, :, bounded], axis=-1) - u_max  # (K, S, B)

@@ -8,7 +8,7 @@ and comparing starts by it keeps the wrong one. :func:`check_plan` integrates th
 Lagrange polynomials through each interval's collocation points: what ``Solution.sample`` returns and a replay
 flies) with :func:`mobisense.ocp.simulate.resimulate_plan`; ``mobisense solve`` and :func:`mobisense.solve` store
 the result as ``plan_check`` in the solution's statistics (``summary.json``) and warn above
-:data:`mobisense.ocp.solution.PLAN_TOLERANCE`.
+:data:`mobisense.ocp.solution_warnings.PLAN_TOLERANCE`.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from ..simulate import resimulate_plan
 from ..solution import Solution
 from .transcription import transcription_for
 
-__all__ = ["check_plan"]
+__all__ = ["check_plan", "record_plan_check"]
 
 
 def check_plan(solution: Solution) -> dict[str, Any]:
@@ -44,3 +44,9 @@ def check_plan(solution: Solution) -> dict[str, Any]:
     difference = (solution.cost - cost) / abs(cost) if cost else None
     return {"cost": cost, "relative_difference": difference, "integrator": check.integrator,
             "time_s": time.perf_counter() - t0}  # fmt: skip
+
+
+def record_plan_check(solution: Solution) -> None:
+    """Store :func:`check_plan` as ``solution.stats["plan_check"]`` for a solved direct solution (else nothing)."""
+    if solution.success and solution.collocation is not None:
+        solution.stats["plan_check"] = check_plan(solution)

@@ -15,6 +15,7 @@ from reference_problems import hussein2008
 import mobisense as ms
 from mobisense.ocp.direct.transcription import transcription_for
 from mobisense.ocp.simulate import integrate
+from mobisense.ocp.solution_warnings import plan_warning
 
 
 def _dop853_cost(solution: ms.Solution) -> float:
@@ -47,7 +48,7 @@ def test_a_resolved_plan_is_confirmed_to_its_discretisation_error():
     assert check["cost"] == pytest.approx(reference, rel=1e-9)
     # Radau-3 at K = 40: J's error is O(h⁵) ≈ 1e-9 relative (docs/theory/direct.md); far below the tolerance
     assert abs(check["relative_difference"]) < 1e-7
-    assert solution.plan_warning() is None and "warning" not in solution.summary()
+    assert plan_warning(solution) is None and "warning" not in solution.summary()
 
 
 def test_an_unresolved_plan_is_reported_with_the_cost_of_what_it_flies():

@@ -1,0 +1,73 @@
+"""Why a solution's numbers are not to be trusted as they stand: the warnings of ``summary.json`` and the command.
+
+Each is a sentence for the user, from what a :class:`~mobisense.ocp.solution.Solution` holds: its plan check
+(:mod:`mobisense.ocp.direct.plan_check`), its strategy's record, its covariance and its baseline.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["PLAN_TOLERANCE", "solution_warnings", "plan_warning", "strategy_warning"]
+
+#: relative difference of the optimiser's J from its plan re-integrated (``stats["plan_check"]``) above which the
+#: grid is reported as not resolving the plan (the discretisation error of a resolved grid is far smaller:
+#: 5e-11 on the default problem at K = 100, 2.2e-7 on coupled_two_sensor at its K = 50)
+PLAN_TOLERANCE = 1e-5
+
+
+def solution_warnings(solution: Any, smallest: float) -> list[str]:
+    """Every warning that applies to ``solution``, whose Σ(t) has smallest eigenvalue ``smallest``."""
+    warnings = [w for w in (plan_warning(solution), strategy_warning(solution)) if w]
+    if smallest <= 0:  # a covariance that is not one: the grid or the solve did not follow the Riccati flow
+        warnings.append(f"Σ(t) is not positive definite (smallest eigenvalue {smallest:.3g}): not a Kalman "
+                        "filter's covariance — the grid does not resolve it or the optimum is a poor one; try "
+                        "more intervals or --multistart K")  # fmt: skip
+    if solution.worse_than_baseline:
+        warnings.append(
+            f"the optimum found (J = {solution.cost:.6g}) costs more than not moving (no-control baseline "
+            f"J = {solution.baseline['cost']:.6g}): a poor local optimum; try --multistart K"
+        )
+    return warnings
+
+
+def plan_warning(solution: Any) -> str | None:
+    """Why J is not to be trusted when the plan check (``stats["plan_check"]``) exceeds :data:`PLAN_TOLERANCE`.
+
+    The check (:func:`mobisense.ocp.direct.plan_check.check_plan`) re-integrates the controls independently of
+    the collocation; None when it is within the tolerance or was not run.
+    """
+    check = solution.stats.get("plan_check")
+    if not check or solution.collocation is None:
+        return None
+    if check.get("cost") is None:
+        return f"the plan check could not re-integrate this plan ({check.get('integrator')}): J is unchecked"
+    difference = check["relative_difference"]
+    if difference is None or abs(difference) <= PLAN_TOLERANCE:
+        return None
+    return (
+        f"the grid does not resolve this plan: its controls re-integrated give J = {check['cost']:.8g}, "
+        f"{100 * abs(difference):.3g} % {'below' if difference > 0 else 'above'} the optimiser's (relative "
+        f"difference {difference:+.2g}, beyond ±{PLAN_TOLERANCE:g}); solve on more than K = {solution.collocation[2]} "
+        "intervals (--intervals) before trusting J or the choice between starts"
+    )
+
+
+def strategy_warning(solution: Any) -> str | None:
+    """Why the plan is not the continuation's when ``solver.strategy: homotopy`` asked for it (else None).
+
+    With a budget the strategy falls back to the cold solve when the continuation would cost more than
+    ``budget`` × the cold solve's iterations or fails (docs/theory/direct.md §5.6): documented, but a user who
+    asked for the paper's method is told which plan they got and how to get the other.
+    """
+    strategy = solution.stats.get("strategy") or {}
+    if strategy.get("strategy") != "homotopy" or strategy.get("kept") in (None, "homotopy"):
+        return None
+    run = next((s for s in strategy.get("starts", []) if s.get("start") == "homotopy"), None)
+    if run is None:
+        return None
+    why = (f"spent its budget of {strategy.get('homotopy_budget')} iterations (solver.homotopy.budget × the cold "
+           "solve's; null lets it finish)" if run.get("status") == "budget spent" else
+           f"ended with {run.get('status')}")  # fmt: skip
+    return (f"strategy homotopy: the continuation stopped at ε = {run.get('eps_reached'):g} when it {why}; "
+            f"the {strategy.get('kept')} solve's plan is kept")  # fmt: skip
