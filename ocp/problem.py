@@ -316,7 +316,8 @@ class Problem(StrictModel):
             return
         a, rate = 1.0 / spec.time_constant, shooting_rate(spec, noise)
         i = min(range(len(noise)), key=noise.__getitem__)
-        key, cause = (f"sensors[{i}].noise.variance_value", f"noise variance {noise[i]:g}") if rate > 2 * a else (
+        noise_dominates = rate * rate - a * a > a * a  # λ_max² = a² + 2aΣσ²/r: the measurement term is the larger
+        key, cause = (f"sensors[{i}].noise.variance_value", f"noise variance {noise[i]:g}") if noise_dominates else (
             "process.field.time_constant", f"time constant {spec.time_constant:g}")  # fmt: skip
         raise InvalidValue(key, f"the {cause} makes the field's fastest rate λ_max = {rate:.3g} per unit time; "
                            f"on intervals h = {T / o.intervals:.3g} the shooting method needs m = {m} RK4 substeps "

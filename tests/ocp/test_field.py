@@ -173,6 +173,16 @@ def test_cost_converges_at_order_four_under_refinement():
     assert orders.min() > 3.5, (costs, orders)  # docs/theory/field.md §3.3: stated order 4
 
 
+def test_the_key_named_for_too_many_substeps_is_the_larger_term_of_the_rate():
+    # λ_max² = a² + 2aσ²/r with a = 1/τ = 1000 and r = 1e-3: 1e6 + 2e6, the measurement term is the larger (2×),
+    # so the noise variance is named, not the time constant; K = 2 on 5 T: m = ceil(2.5 · 1732 / 0.25) = 17321
+    data = field_problem(shooting={"intervals": 2})
+    data["process"]["field"]["time_constant"] = 1e-3
+    data["sensors"][0]["noise"]["variance_value"] = 1e-3
+    with pytest.raises(ms.ConfigError, match=r"sensors\[0\]\.noise\.variance_value: the noise variance 0\.001 makes"):
+        ms.Problem.from_dict(data)
+
+
 def _noise(value: float):
     def apply(data):
         data["sensors"][0]["noise"]["variance_value"] = value
