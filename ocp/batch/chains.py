@@ -8,8 +8,9 @@ the pieces so that two chains run outwards from one cold head (:func:`pair_chain
 dependent dask tasks pinned to its worker: every task receives its predecessor's result on the worker itself
 (the second chain of a pair receives the head's, once) and starts from its primal–dual point, while the client
 only collects the results. One dask
-task solves a *link* of consecutive tasks (:func:`chain_links`: 1, 2, 4, then :data:`LINK_TASKS` at a time), so
-that dask's round trip (≈ 20 ms on two cores) is paid once per link, not once per warm solve (≈ 10 ms).
+task solves a *link* of consecutive tasks (:class:`ChainLinks`: 1, 2, 4, … up to :data:`LINK_TASKS` at a time, and
+about :data:`LINK_SECONDS` of work once the chain's pace is known), so that dask's round trip (≈ 20 ms on two
+cores) is paid once per link, not once per warm solve (≈ 10 ms).
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ import numpy as np
 
 __all__ = [
     "LINK_TASKS",
+    "LINK_SECONDS",
+    "ChainLinks",
     "snake_order",
     "cut_chains",
     "pair_chains",
@@ -29,8 +32,10 @@ __all__ = [
     "best_seed",
 ]
 
-#: the most tasks one dask task of a chain solves (the first links are shorter: results come early)
-LINK_TASKS = 8
+#: the most tasks one dask task of a chain solves (the first links are shorter: results come early) …
+LINK_TASKS = 32
+#: … and the work (s) it holds once the chain's pace is known (:class:`ChainLinks`)
+LINK_SECONDS = 0.5
 
 
 def snake_order(coordinates: list[np.ndarray], keys: list[Any] | None = None) -> list[int]:
@@ -113,19 +118,46 @@ def pair_chains(order: list[int], workers: int) -> list[tuple[list[int], int | N
     return plan
 
 
-def chain_links(chain: list[int], longest: int = LINK_TASKS) -> list[list[int]]:
-    """Cut a chain into consecutive links of 1, 2, 4, … tasks, at most ``longest`` each.
+class ChainLinks:
+    """A chain's links, sized as they are taken: 1, 2, 4, … tasks, at most ``longest`` and about ``seconds`` each.
 
     The first link is the chain's cold head alone (its result, and the sweep's first rows, come back as soon as
-    it is solved); the links then double, so that a long chain costs few round trips and a short one still
-    reports progress.
+    it is solved); the links then double, so that a long chain of fast tasks costs few dask round trips, until a
+    link would take longer than ``seconds`` at the pace measured so far (:meth:`take`'s ``seconds_per_task``), so
+    that a chain of slow tasks still reports progress and an interrupted sweep loses little.
+
+    Parameters
+    ----------
+    chain : list of int
+        Task positions in solving order.
+    longest : int
+        The most tasks in one link.
+    seconds : float
+        The work one link should hold (s), once the pace of the chain's tasks is known.
     """
-    links: list[list[int]] = []
-    start, size = 0, 1
-    while start < len(chain):
-        links.append(chain[start : start + size])
-        start += size
-        size = min(2 * size, max(1, longest))
+
+    def __init__(self, chain: list[int], longest: int = LINK_TASKS, seconds: float = LINK_SECONDS) -> None:
+        self.chain, self.longest, self.seconds = chain, max(1, longest), seconds
+        self.start, self.size = 0, 1
+
+    def take(self, seconds_per_task: float | None = None) -> list[int] | None:
+        """The next link (None when the chain is used up), given the measured seconds per task if known."""
+        if self.start >= len(self.chain):
+            return None
+        size = self.size
+        if seconds_per_task is not None and seconds_per_task > 0:
+            size = max(1, min(size, int(self.seconds / seconds_per_task)))
+        link = self.chain[self.start : self.start + size]
+        self.start += size
+        self.size = min(2 * size, self.longest)
+        return link
+
+
+def chain_links(chain: list[int], longest: int = LINK_TASKS) -> list[list[int]]:
+    """The links of ``chain`` when no pace is known (:class:`ChainLinks`): 1, 2, 4, … tasks, at most ``longest``."""
+    links, queue = [], ChainLinks(chain, longest)
+    while (link := queue.take()) is not None:
+        links.append(link)
     return links
 
 
@@ -188,5 +220,6 @@ def solve_in_chain(payload: dict[str, Any], previous: dict[str, Any] | None = No
         result = solve_task({**payload, "seed": seed})
     except Exception as exc:  # noqa: BLE001  (a task's failure is data, not the end of its chain)
         result = {"row": {"status": "error", "error": f"{type(exc).__name__}: {exc}"}}
-    result["carry"] = result.get("nlp") if result.get("nlp") is not None else seed
+    nlp = result.pop("nlp", None)  # the client has no use for it: only the chain's next task does
+    result["carry"] = nlp if nlp is not None else seed
     return result

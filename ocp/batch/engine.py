@@ -5,8 +5,9 @@ transcription of a problem structure (:func:`mobisense.ocp.direct.solver.transcr
 parameters. Warm-started tasks run in chains of neighbours, one per worker (:mod:`mobisense.ocp.batch.chains`): each
 task is started on its worker from its predecessor's primal–dual point (re-scaled by
 :meth:`DirectCollocation.transfer`), without a round trip through the client, and one dask task solves a link of
-up to :data:`~mobisense.ocp.batch.chains.LINK_TASKS` consecutive tasks. A task that raises, or whose worker
-dies more often than dask retries, becomes a row with ``status = "error"``; nothing stops the sweep.
+up to :data:`~mobisense.ocp.batch.chains.LINK_TASKS` consecutive tasks (fewer when they are slow). A task that
+raises, or whose worker dies more often than dask retries, becomes a row with ``status = "error"``; nothing stops
+the sweep.
 """
 
 from __future__ import annotations
@@ -20,13 +21,13 @@ import numpy as np
 
 from ...core.errors import ConfigError
 from ...core.interrupts import deferred_interrupts
-from .chains import best_seed, chain_links, pair_chains, snake_order, solve_chain_link
+from .chains import ChainLinks, best_seed, pair_chains, snake_order, solve_chain_link
 from .cluster import CONNECT_TIMEOUT
 from .worker import shareable_starts, solve_start_share, solve_task, task_problem
 
 __all__ = ["open_client", "run_tasks", "CHAIN_AHEAD"]
 
-#: links of one chain submitted ahead of their results (a link is up to LINK_TASKS tasks)
+#: links of one chain submitted ahead of their results (a link is up to LINK_TASKS tasks, see ChainLinks)
 CHAIN_AHEAD = 4
 #: dask settings of the local cluster: every task is pinned to its chain's worker, so there is nothing to steal
 #: or rebalance; the workers' statistical profiler (a thread sampling the solving thread every 10 ms) and the
@@ -210,7 +211,10 @@ class _TaskRun:
             self.seeded_by = [seed for _, seed in plan]
         else:
             self.chains, self.seeded_by = [list(range(n))], [None]
-        self.queues = [iter(chain_links(c) if warm_start else [[i] for i in c]) for c in self.chains]
+        # each queue hands out its next tasks: a chain's links (sized by the pace of its finished tasks), or one
+        # cold task at a time
+        self.queues = [ChainLinks(c) if warm_start else ChainLinks(c, longest=1) for c in self.chains]
+        self.pace: dict[int, float] = {}  # queue -> worker-seconds per task of its latest finished link
         # a chain's next links wait on its worker (their payloads are small), so that the worker never waits for
         # the client (busy writing a batch of results); cold tasks are queued two per worker
         self.limit = CHAIN_AHEAD if warm_start else in_flight or 2 * len(self.workers)
@@ -239,7 +243,7 @@ class _TaskRun:
 
     def submit_next(self, q: int) -> bool:
         """Submit queue ``q``'s next link (or cold task); False when it has none left."""
-        tasks = next(self.queues[q], None)
+        tasks = self.queues[q].take(self.pace.get(q))
         if tasks is None:
             return False
         key = f"task-{tasks[0]}-{time.time_ns()}"
@@ -281,6 +285,9 @@ class _TaskRun:
             results = future.result() if self.warm_start else [future.result()]
         except Exception as exc:  # noqa: BLE001  (a task's failure is data, not a crash of the sweep)
             results = [{"row": {"status": "error", "error": f"{type(exc).__name__}: {exc}"}} for _ in tasks]
+        seconds = [r["row"]["time_s"] for r in results if isinstance(r["row"].get("time_s"), float)]
+        if seconds and future is not self.heads.get(q):  # a cold head is no measure of the warm tasks after it
+            self.pace[q] = sum(seconds) / len(seconds)
         if q in self.speculating:
             self.held.setdefault(q, []).append((tasks, results))
         else:
@@ -319,7 +326,7 @@ class _TaskRun:
             del self.futures[f]
         self.generation[q] += 1
         self.pending[q] = 0
-        self.queues[q] = iter(chain_links(self.chains[q]))
+        self.queues[q] = ChainLinks(self.chains[q])
         self.last.pop(q, None)
         self.heads.pop(q, None)
         self.fill(q)

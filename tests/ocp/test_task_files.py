@@ -8,7 +8,7 @@ import xarray as xr
 
 from mobisense.core.files import write_netcdf
 from mobisense.core.netcdf import open_dataset
-from mobisense.ocp.batch.chains import chain_links, cut_chains, pair_chains, snake_order, solve_chain_link
+from mobisense.ocp.batch.chains import ChainLinks, chain_links, cut_chains, pair_chains, snake_order, solve_chain_link
 from mobisense.ocp.task_files import shape_key, stack_tasks, task_dataset
 
 
@@ -75,6 +75,20 @@ def test_chain_links_double_up_to_the_longest_and_keep_the_order():
     assert [len(link) for link in chain_links(list(range(5)), longest=1)] == [1] * 5
 
 
+def test_chain_links_hold_about_link_seconds_once_the_pace_is_known():
+    queue = ChainLinks(list(range(100)), longest=32, seconds=0.5)
+    sizes = [len(queue.take()) for _ in range(3)]  # no pace yet: 1, 2, 4
+    sizes += [len(queue.take(0.007)) for _ in range(3)]  # fast tasks (7 ms): doubling goes on up to 32
+    sizes.append(len(queue.take(0.2)))  # 0.2 s per task: 0.5 s holds 2 tasks
+    sizes.append(len(queue.take(3.0)))  # slower than a link's worth: one task at a time
+    sizes.append(len(queue.take(0.007)))  # fast again: doubling starts over from the last size
+    assert sizes == [1, 2, 4, 8, 16, 32, 2, 1, 2]
+    rest = []
+    while (link := queue.take(0.001)) is not None:
+        rest += link
+    assert rest == list(range(sum(sizes), 100))  # every task once, in order
+
+
 def test_a_chain_link_starts_each_task_from_the_one_before(monkeypatch):
     import mobisense.ocp.batch.worker as worker
 
@@ -91,6 +105,7 @@ def test_a_chain_link_starts_each_task_from_the_one_before(monkeypatch):
     assert seen == ["start", "a", "b", "b"]  # after a failure the next task starts from the point before it
     assert [r["row"]["status"] for r in results] == ["solved", "solved", "error", "solved"]
     assert ["carry" in r for r in results] == [False, False, False, True] and results[-1]["carry"] == "c"
+    assert not any("nlp" in r for r in results)  # the client receives one NLP point per link, not one per task
 
 
 def test_pair_chains_run_outwards_from_shared_heads():
