@@ -50,7 +50,15 @@ from .information_model import (
     transition_matrix,
 )
 from .noise_config import CooperativeNoise
-from .rollouts import OUTPUTS, rollout_casadi, rollout_components, rollout_shared
+from .rollouts import (
+    OUTPUTS,
+    check_prior,
+    prior_is_regular,
+    process_is_regular,
+    rollout_casadi,
+    rollout_components,
+    rollout_shared,
+)
 
 __all__ = [
     "HessianSource",
@@ -386,20 +394,26 @@ def run_cooperative_filter(
     P0 = np.asarray(initial_covariance, dtype=float)
     closed_loop = hessians is not None and callable(hessians)
     single = measurements.ndim == 2 and positions.ndim == 3 and x0.ndim == 1 and P0.ndim == 2
+    check_prior(P0)
+    # the compiled rollout is in information form: a singular prior needs a positive definite M after step 0
+    informative = prior_is_regular(P0) or process_is_regular(noise.process)
     if engine == "auto":
-        engine = "casadi" if single and not closed_loop else "numpy"
+        engine = "casadi" if single and not closed_loop and informative else "numpy"
     if engine == "casadi" and (closed_loop or not single):
         raise ValueError("engine='casadi' needs a single run (2-D measurements) and array Hessians")
     if closed_loop:
         H0 = np.zeros((2, 2)) if initial_hessian is None else np.asarray(initial_hessian, dtype=float)
         return _run_closed_loop(positions, measurements, noise, x0, P0, hessians, H0)
     hessian_array = np.zeros(positions.shape[:-2] + (2, 2)) if hessians is None else np.asarray(hessians, float)
+    if engine == "casadi":
+        check_prior(P0, noise.process)
     if engine == "casadi" or (positions.ndim == 3 and P0.ndim == 2):
         model = model_sequence(positions, hessian_array, noise)
         roll, rollout = (rollout_casadi, "compiled") if engine == "casadi" else (rollout_shared, "shared")
         out = roll(model, measurements, x0, P0, outputs)
         centers = model["centers"]
     else:
+        check_prior(P0, noise.process)  # the per-run rollout is in information form
         out = rollout_components(positions, hessian_array, noise, measurements, x0, P0, outputs)
         centers, rollout = out["centers"], "components"
     return CooperativeFilterResult(

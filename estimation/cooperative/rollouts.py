@@ -33,7 +33,16 @@ from ..components import ComponentMatrix
 from .information_model import hessian_drift, hessian_to_vec, taylor_matrices, transition_matrix
 from .noise_config import CooperativeNoise
 
-__all__ = ["rollout_shared", "component_model", "rollout_components", "rollout_casadi", "OUTPUTS"]
+__all__ = [
+    "rollout_shared",
+    "component_model",
+    "rollout_components",
+    "rollout_casadi",
+    "prior_is_regular",
+    "process_is_regular",
+    "check_prior",
+    "OUTPUTS",
+]
 
 #: what a rollout returns: the posterior only, or also priors and innovations
 OUTPUTS = ("all", "posterior")
@@ -184,6 +193,7 @@ def rollout_components(
     J, j = kalman.information_contribution(Y, model["C"], model["R"])  # all steps and runs at once
     Q = ComponentMatrix.from_array(noise.process, constant=True)
     x = ComponentMatrix.from_array(flat(x0, 1)[..., None])  # entries (B,)
+    regular = prior_is_regular(P0)
     P = ComponentMatrix.from_array(flat(P0, 2))
     X, P_out = np.empty((K, 3, 1, n_runs)), np.empty((K, 3, 3, n_runs))
     keep = outputs == "all"
@@ -196,7 +206,12 @@ def rollout_components(
         if keep:
             _store(Xm, k, x)
             _store(Pm, k, P)
-        x, P = kalman.information_update(x, P, J.index(k), j.index(k))  # docs/theory/cooperative.md, eq. cooperative.9
+        if k or regular:
+            x, P = kalman.information_update(
+                x, P, J.index(k), j.index(k)
+            )  # docs/theory/cooperative.md, eq. cooperative.9
+        else:  # a prior with a known direction has no information form: fused by the covariance form
+            x, P, _, _ = kalman.update(x, P, Y.index(0), model["C"].index(0), model["R"].index(0))
         _store(X, k, x)
         _store(P_out, k, P)
     centers = model["centers"]
@@ -213,6 +228,50 @@ def rollout_components(
             S=_batch_first(np.moveaxis(S.to_array(batch_shape), 1, -1), batch),
         )  # fmt: skip
     return out
+
+
+def prior_is_regular(P0: np.ndarray) -> bool:
+    """True when every prior covariance ``P0`` (shape ``([...,] 3, 3)``) is positive definite to working precision.
+
+    The information-form update ``P⁺ = (P⁻¹ + J)⁻¹`` needs ``P⁻¹``; a prior that knows a direction exactly (a
+    zero eigenvalue, e.g. a known initial value) is fused by the covariance form instead. Later priors are
+    ``F P⁺ F' + M``: positive definite when ``M`` is (:func:`check_prior`).
+    """
+    P = np.asarray(P0, dtype=float)
+    eigenvalues = np.linalg.eigvalsh(0.5 * (P + np.swapaxes(P, -1, -2)))
+    return bool(np.all(eigenvalues[..., 0] > 1e-14 * eigenvalues[..., -1]))
+
+
+def process_is_regular(process: np.ndarray) -> bool:
+    """True when the process noise ``M`` is positive definite (every prior after step 0 is then invertible)."""
+    return bool(np.linalg.eigvalsh(0.5 * (process + process.T))[0] > 0)
+
+
+def check_prior(P0: np.ndarray, process: np.ndarray | None = None) -> None:
+    """Raise ``ValueError`` unless ``P0`` is symmetric positive semidefinite (and, with ``process``, usable).
+
+    With the process noise ``M`` (``process``), also unless the information-form rollouts can run from it: a
+    singular ``P0`` (a direction known exactly) is fused at step 0 by the covariance form, after which
+    ``F P⁺ F' + M`` is invertible only if ``M`` is positive definite.
+    """
+    P = np.asarray(P0, dtype=float)
+    if P.shape[-2:] != (3, 3) or not np.all(np.isfinite(P)):
+        raise ValueError(f"initial_covariance: expected finite ([B,] 3, 3) matrices, got shape {P.shape}")
+    eigenvalues = np.linalg.eigvalsh(0.5 * (P + np.swapaxes(P, -1, -2)))
+    scale = np.maximum(1.0, np.abs(P).max(axis=(-1, -2)))
+    if np.any(np.abs(P - np.swapaxes(P, -1, -2)) > 1e-12 * scale[..., None, None]) or np.any(
+        eigenvalues[..., 0] < -1e-12 * scale
+    ):
+        raise ValueError(
+            "initial_covariance: expected symmetric positive semidefinite matrices, smallest eigenvalue "
+            f"{float(eigenvalues[..., 0].min()):g}"
+        )
+    if process is not None and not prior_is_regular(P) and not process_is_regular(process):
+        raise ValueError(
+            "initial_covariance: singular, and the process noise M is singular too: the information-form "
+            "rollouts need one of them positive definite (engine='numpy' with positions shared by all runs, or "
+            "CooperativeKalmanFilter, run the covariance form)"
+        )
 
 
 # ------------------------------------------------------------------------------------------ compiled
@@ -274,7 +333,10 @@ def rollout_casadi(
     K = measurements.shape[0]
     y = (measurements - model["DH"])[..., None]
     J, j = kalman.information_contribution(y, model["C"], model["R"])
-    x_first, P_first = kalman.information_update(x0[:, None], P0, J[0], j[0])  # step 0: no prediction
+    if prior_is_regular(P0):  # step 0: no prediction
+        x_first, P_first = kalman.information_update(x0[:, None], P0, J[0], j[0])
+    else:  # a prior with a known direction has no information form: fused by the covariance form
+        x_first, P_first, _, _ = kalman.update(x0[:, None], P0, y[0], model["C"][0], model["R"][0])
     n_chunks = max(1, -(-(K - 1) // _UNROLL))
     pad = n_chunks * _UNROLL - (K - 1)  # trailing steps without information, discarded
 

@@ -188,11 +188,22 @@ class SpatialNoise:
             ``V_k W_{k−1}⁻¹``.
         Q_w : ndarray, shape (..., N, N)
             ``W_k − A^w W_{k−1} A^w'`` (the conditional covariance of ``w_k`` given ``w_{k−1}``).
+
+        Raises
+        ------
+        ValueError
+            ``W_{k−1}`` is singular (two platforms at one point).
         """
         W_prev = self.W(previous_positions)
         V = self.V(positions, previous_positions)
         # docs/theory/cooperative.md, eq. cooperative.11
-        A_w = np.swapaxes(np.linalg.solve(W_prev, np.swapaxes(V, -1, -2)), -1, -2)
+        try:
+            A_w = np.swapaxes(np.linalg.solve(W_prev, np.swapaxes(V, -1, -2)), -1, -2)
+        except np.linalg.LinAlgError:
+            raise ValueError(
+                "positions: the spatial-noise covariance W of the previous positions is singular (two platforms "
+                "at one point?): the coloured-noise model needs distinct platform positions"
+            ) from None
         # docs/theory/cooperative.md, eq. cooperative.11
         Q_w = self.W(positions) - A_w @ W_prev @ np.swapaxes(A_w, -1, -2)
         return A_w, 0.5 * (Q_w + np.swapaxes(Q_w, -1, -2))

@@ -36,12 +36,18 @@ __all__ = [
     "steady_state_bytes",
     "steady_state_seconds",
     "MAX_POSITIONS",
+    "MIN_ASPECT",
     "cross_steady_state",
     "cross_trace",
     "cross_trace_function",
     "cross_information",
+    "measurement_information",
 ]
 
+#: the narrowest formation :func:`steady_state` accepts, as its width over its length (singular values of the
+#: centred positions): the error of the steady state grows as the formation narrows — against an 80-digit
+#: reference, 7e-12 at 5e-5, 2e-8 at 5e-7, 1e-6 at 5e-9, 1e-3 at 5e-11 (docs/theory/steady_state.md §1)
+MIN_ASPECT = 1e-6
 #: most platforms :func:`steady_state` accepts: its ``D U D' + R`` is N × N (memory N², Cholesky time N³);
 #: 5000 platforms need ~1 GB and a few seconds
 MAX_POSITIONS = 5000
@@ -83,7 +89,8 @@ def steady_state(positions: np.ndarray, noise: CooperativeNoise) -> SteadyState:
     Parameters
     ----------
     positions : ndarray, shape (N, 2)
-        Platform positions (their mean is the centre), 3 ≤ N ≤ :data:`MAX_POSITIONS` and not collinear.
+        Platform positions (their mean is the centre), 3 ≤ N ≤ :data:`MAX_POSITIONS`, no narrower than
+        :data:`MIN_ASPECT` of their length.
     noise : CooperativeNoise
 
     Returns
@@ -93,12 +100,14 @@ def steady_state(positions: np.ndarray, noise: CooperativeNoise) -> SteadyState:
     Raises
     ------
     ValueError
-        ``positions: …`` for too many, too few or collinear positions (checked before anything of size N² is
-        allocated); ``numpy.linalg.LinAlgError`` (a ``ValueError``) when ``D U D' + R`` is not positive definite.
+        ``positions: …`` for too many, too few, collinear or nearly collinear positions (checked before
+        anything of size N² is allocated); ``noise.process: …`` for a process noise ``M`` that is not
+        positive definite; ``numpy.linalg.LinAlgError`` (a ``ValueError``) when ``D U D' + R``
+        is not positive definite.
     RuntimeError
-        When the Riccati equation has no stabilising solution to working precision: positions so nearly
-        collinear that the information ``C' S⁻¹ C`` is singular to round-off, or positions and noise levels
-        many orders of magnitude apart.
+        When the Riccati equation has no stabilising solution to working precision: noise levels that leave
+        the information ``C' S⁻¹ C`` singular to round-off, or positions and noise levels so many orders of
+        magnitude apart that ``D U D' + R`` overflows.
 
     Notes
     -----
@@ -106,11 +115,13 @@ def steady_state(positions: np.ndarray, noise: CooperativeNoise) -> SteadyState:
     and ``S = D U D' + R`` (N × N). Its information form ``P⁻ ↦ (P⁻⁻¹ + J)⁻¹ + M`` depends on the measurements
     only through the 3 × 3 information ``J = C' S⁻¹ C`` (Woodbury), so the same prior ``P∞(−)`` solves
     ``control.dare(I, L, M, I_3)`` with ``J = L L'``: a 3 × 3 problem instead of an (N + 6)-dimensional
-    pencil, with exactly symmetric weights. ``S`` is factorised once (Cholesky, N³/3 flops, a few N × N
-    arrays: :func:`steady_state_bytes`); then ``P∞(+) = (P∞(−)⁻¹ + J)⁻¹`` and ``K∞ = P∞(+) (S⁻¹ C)'``.
+    pencil, with exactly symmetric weights. ``J`` and ``C' S⁻¹`` come from :func:`measurement_information`
+    (``R`` factorised once, N³/3 flops and a few N × N arrays: :func:`steady_state_bytes`, then a QR of an
+    (N + 4) × 7 matrix); ``J`` is judged (singular or not) and factorised after scaling by its diagonal, so that
+    the units of the positions and noise levels do not matter; then ``P∞(+) = (P∞(−)⁻¹ + J)⁻¹`` and
+    ``K∞ = P∞(+) C' S⁻¹``.
     """
     import control
-    import scipy.linalg
 
     positions = np.asarray(positions, dtype=float)
     n = positions.shape[0] if positions.ndim == 2 else 0
@@ -121,31 +132,42 @@ def steady_state(positions: np.ndarray, noise: CooperativeNoise) -> SteadyState:
         )
     if not np.all(np.isfinite(positions)):
         raise ValueError("positions: expected finite numbers")
+    process = 0.5 * (noise.process + noise.process.T)
+    if not np.linalg.eigvalsh(process)[0] > 0:
+        raise ValueError(
+            "noise.process: expected a positive definite M: a direction without process noise is learnt without "
+            "bound (its covariance falls like 1/k), so the Riccati equation has no stabilising solution"
+        )
     C, D = taylor_matrices(positions)
     if np.linalg.matrix_rank(C) < 3:
         raise ValueError(
             "positions: collinear formation, the steady state is unbounded (docs/theory/cooperative.md §4, Cd5)"
         )
-    R_total = noise.total_measurement_covariance(D)
-    R_total = 0.5 * (R_total + R_total.T)  # D U D' in floating point is symmetric only to round-off
-    if not np.all(np.isfinite(R_total)):
-        raise RuntimeError(
-            "the measurement covariance D U D' + R overflows: the positions and noise levels are too "
-            "far apart in scale (change the units)"
+    spread = np.linalg.svd(positions - positions.mean(axis=0), compute_uv=False)
+    if not spread[1] >= MIN_ASPECT * spread[0]:
+        raise ValueError(
+            f"positions: nearly collinear formation (width {spread[1] / spread[0]:.1e} of its length, at least "
+            f"{MIN_ASPECT:g} needed): the gradient across it is so poorly observed that its steady state cannot be "
+            "computed to working precision (docs/theory/cooperative.md §4, Cd5)"
         )
-    # S⁻¹ C by Cholesky (LinAlgError, a ValueError, if S is not positive definite)
-    whitened = scipy.linalg.solve(R_total, C, assume_a="pos", check_finite=False)
-    del R_total
-    information = C.T @ whitened
+    information, weights = measurement_information(C, D, noise)  # J = C' S⁻¹ C and C' S⁻¹
     information = 0.5 * (information + information.T)  # J = C' S⁻¹ C
-    eigenvalues, vectors = np.linalg.eigh(information)
-    if not eigenvalues[0] > 1e-13 * eigenvalues[-1]:  # below, eigh's smallest eigenvalue is round-off
+    # J's entries carry the units of the value, gradient and their noise (a formation of size a gives
+    # J ~ diag(1, a², a²)/σ²): judged and factorised after scaling by its diagonal, J = Δ Ĵ Δ, so that only
+    # the geometry (how far from collinear) decides, not the units
+    scale = np.sqrt(np.diag(information))
+    if not np.all(scale > 0):
         raise RuntimeError(
-            "positions: nearly collinear formation, the information C'(DUD' + R)⁻¹C is singular to working "
-            "precision and the steady state unbounded (docs/theory/cooperative.md §4, Cd5)"
+            "positions: the measurements carry no information about the value or a gradient component "
+            "(docs/theory/cooperative.md §4, Cd5)"
         )
-    root = vectors * np.sqrt(eigenvalues)  # J = L L'
-    process = 0.5 * (noise.process + noise.process.T)
+    eigenvalues, vectors = np.linalg.eigh(information / np.outer(scale, scale))
+    if not eigenvalues[0] > 1e-15 * eigenvalues[-1]:  # below, eigh's smallest eigenvalue is round-off
+        raise RuntimeError(
+            "the information C'(DUD' + R)⁻¹C is singular to working precision: the noise levels leave the value "
+            "or a gradient component unobserved (docs/theory/cooperative.md §4, Cd5)"
+        )
+    root = scale[:, None] * (vectors * np.sqrt(eigenvalues))  # J = L L', L = Δ V Λ^½
     # docs/theory/steady_state.md, eq. steady_state.1 (dual, information form)
     try:
         prior, _, _ = control.dare(np.eye(3), root, process, np.eye(3))
@@ -156,15 +178,82 @@ def steady_state(positions: np.ndarray, noise: CooperativeNoise) -> SteadyState:
             "the positions may be nearly collinear or the noise levels too far apart"
         ) from exc
     prior = 0.5 * (prior + prior.T)
-    # P∞(+) = P∞(−) − P∞(−) L (L' P∞(−) L + I)⁻¹ L' P∞(−)  (= (P∞(−)⁻¹ + J)⁻¹)
-    PL = prior @ root
-    posterior = prior - PL @ np.linalg.solve(root.T @ PL + np.eye(3), PL.T)
+    # P∞(+) = (P∞(−)⁻¹ + J)⁻¹: two inverses of positive definite 3 × 3 matrices, no difference of large terms
+    # (the Woodbury form P − P L (L' P L + I)⁻¹ L' P lost 1.7e-6 relative on a 1000-L cross, 8.6e-5 with one
+    # platform 1e13 times less noisy than the others)
+    with np.errstate(all="ignore"):
+        posterior = np.linalg.inv(np.linalg.inv(prior) + information)
     posterior = 0.5 * (posterior + posterior.T)
     if not (np.all(np.isfinite(prior)) and np.all(np.isfinite(posterior))):
         raise RuntimeError(
             "the steady-state covariance is not finite: the noise levels make the Riccati equation degenerate"
         )
-    return SteadyState(positions, prior, posterior, posterior @ whitened.T)
+    return SteadyState(positions, prior, posterior, posterior @ weights)
+
+
+def measurement_information(C: np.ndarray, D: np.ndarray, noise: CooperativeNoise) -> tuple[np.ndarray, np.ndarray]:
+    """``J = C' S⁻¹ C`` (3 × 3) and ``C' S⁻¹`` (3 × N) for ``S = D U D' + R``, without forming ``S``.
+
+    ``S`` is as ill-conditioned as the platforms are far apart (``D`` grows with the squared offsets: one
+    platform 1e4 L from three at unit distance gives cond S ≈ 1e16, and ``J`` from a Cholesky solve with ``S``
+    put the steady state 3.9e-5 off an 80-digit reference, python-control's DARE on the full ``S`` 20 %).
+    Instead the Hessian error is kept as an unknown ``e = G f`` (``U = G G'``, ``f`` with unit covariance) of
+    the whitened least-squares problem ``[L⁻¹ D G, L⁻¹ C; I, 0] [f; s] ≈ [L⁻¹ p; 0]`` (``R = L L'``), and
+    eliminated by a QR factorisation of its (N + r) × (r + 3) matrix: the trailing 3 × 3 block ``T`` of the
+    triangular factor gives ``J = T'T`` and ``C' S⁻¹ = T' Q₂' L⁻¹`` (``Q₂``: the factor's last three columns,
+    first N rows). Orthogonal transformations only (rows sorted by decreasing norm first), so the spread of
+    the offsets and of the noise levels costs little accuracy (7.5e-9 on that case). Falls back to a Cholesky
+    factorisation of ``S`` when ``R`` alone is not
+    positive definite (a platform without measurement noise).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        ``D U D' + R`` is not positive definite.
+    RuntimeError
+        ``D U D' + R`` overflows.
+    """
+    import scipy.linalg
+
+    n = C.shape[0]
+    R = noise.measurement_matrix(n)
+    R = 0.5 * (R + R.T)
+    U = 0.5 * (noise.hessian_error + noise.hessian_error.T)
+    with np.errstate(over="ignore", invalid="ignore"):
+        finite = np.all(np.isfinite(D @ U)) and np.all(np.isfinite(R))
+    if not finite:
+        raise RuntimeError(
+            "the measurement covariance D U D' + R overflows: the positions and noise levels are too "
+            "far apart in scale (change the units)"
+        )
+    try:
+        L = np.linalg.cholesky(R)
+    except np.linalg.LinAlgError:  # R singular: S itself must be positive definite (Cholesky of S)
+        S = noise.total_measurement_covariance(D)
+        S = 0.5 * (S + S.T)
+        if not np.all(np.isfinite(S)):
+            raise RuntimeError(
+                "the measurement covariance D U D' + R overflows: the positions and noise levels are too "
+                "far apart in scale (change the units)"
+            ) from None
+        whitened = scipy.linalg.solve(S, C, assume_a="pos", check_finite=False)
+        return C.T @ whitened, whitened.T
+    lam, V = np.linalg.eigh(U)
+    keep = lam > 1e-15 * max(float(lam[-1]), 0.0)
+    G = V[:, keep] * np.sqrt(lam[keep])  # U = G G' (rank r ≤ 4)
+    r = G.shape[1]
+    solve = functools.partial(scipy.linalg.solve_triangular, L, lower=True, check_finite=False)
+    top = np.hstack([solve(D @ G), solve(C)])
+    A = np.vstack([top, np.hstack([np.eye(r), np.zeros((r, 3))])])
+    # rows in decreasing norm: Householder QR is then accurate row by row (Powell & Reid), which matters when
+    # one platform's noise is many orders of magnitude below the others'
+    order = np.argsort(-np.linalg.norm(A, axis=1), kind="stable")
+    Q_sorted, T = np.linalg.qr(A[order])  # (N + r) × (r + 3), (r + 3) × (r + 3)
+    Q = np.empty_like(Q_sorted)
+    Q[order] = Q_sorted
+    T22 = T[r:, r:]
+    weights = T22.T @ scipy.linalg.solve_triangular(L, Q[:n, r:], lower=True, trans="T", check_finite=False).T
+    return T22.T @ T22, weights
 
 
 def steady_state_bytes(n_platforms: int) -> float:

@@ -314,6 +314,8 @@ class CellFilter:
         measurements : ndarray, shape (n,)
             Their measurements at step k (field unit).
         """
+        if not hasattr(self, "_first"):
+            raise RuntimeError("update() before start(): initialise the cell from its first measurements")
         positions = np.asarray(positions, dtype=float)
         if self._first:
             x_prior, P_prior = self._x, self._P

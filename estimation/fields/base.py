@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from ...core.registry import Registry
+from ...core.registry import Lazy, Registry
 
 __all__ = ["Field", "FIELDS", "register_field", "make_field", "level_curve_frame"]
 
@@ -37,8 +37,18 @@ class Field(ABC):
         """Hessian ∇²z(r, t), shape ``r.shape + (2,)``."""
 
 
-#: field kind -> Field subclass
-FIELDS: Registry[type[Field]] = Registry("field kind")
+#: field kind -> Field subclass; the built-in kinds are imported when first looked up (``make_field("quadratic")``
+#: works in a fresh interpreter), fields of other packages are added by :func:`register_field`
+FIELDS: Registry[type[Field]] = Registry(
+    "field kind",
+    {
+        "quadratic": Lazy("mobisense.estimation.fields.library:QuadraticField"),
+        "two_charges": Lazy("mobisense.estimation.fields.library:TwoChargesField"),
+        "ocean_temperature": Lazy("mobisense.estimation.fields.library:OceanTemperatureField"),
+        "advection_diffusion": Lazy("mobisense.estimation.fields.advection_diffusion:AdvectionDiffusionField"),
+        "gridded": Lazy("mobisense.estimation.fields.gridded:GriddedField"),
+    },
+)
 
 
 def register_field(cls: type[Field]) -> type[Field]:

@@ -104,6 +104,44 @@ def test_engines_batches_and_step_api_agree() -> None:
     assert ds["estimate"].dims == ("run", "step", "state") and ds["covariance"].dims == ("step", "state", "state2")
 
 
+def test_a_known_initial_value_runs_on_every_engine() -> None:
+    """A singular prior (the value known exactly) has no information form: step 0 is fused by the covariance form."""
+    K, B = 40, 3
+    rng = np.random.default_rng(5)
+    positions = _trajectory(K)
+    noise = CooperativeNoise.from_sigmas(0.05, 0.3, 0.2)
+    meas = rng.normal(size=(B, K, 4))
+    x0, P0 = np.array([2.0, 0.1, -0.3]), np.diag([0.0, 1.0, 0.5])
+    joseph = run_cooperative_filter(positions, meas[1], noise, x0, P0, engine="numpy")  # covariance form only
+    compiled = run_cooperative_filter(positions, meas[1], noise, x0, P0)  # auto: the compiled rollout
+    per_run = run_cooperative_filter(np.broadcast_to(positions, (B,) + positions.shape), meas, noise, x0, P0)
+    assert compiled.meta["rollout"] == "compiled" and per_run.meta["rollout"] == "components"
+    # the known value stays known at step 0 (the update cannot change an exactly known state)
+    assert joseph.states[0, 0] == pytest.approx(2.0, abs=1e-12) and abs(joseph.covariances[0, 0, 0]) < 1e-12
+    # the same recursion in two forms: round-off only (cond(P) ≲ 1e2 over 40 steps)
+    for name in ("states", "covariances"):
+        ref = getattr(joseph, name)
+        np.testing.assert_allclose(getattr(compiled, name), ref, atol=1e-12, err_msg=name)
+        np.testing.assert_allclose(getattr(per_run, name)[1], ref, atol=1e-12, err_msg=name)
+    # with M singular too, every prior stays singular: the covariance form (auto picks it) or a clear error
+    static = CooperativeNoise(np.zeros((3, 3)), 0.09, 0.04 * np.eye(4))
+    auto = run_cooperative_filter(positions, meas[1], static, x0, P0)
+    assert auto.meta["rollout"] == "shared" and np.all(np.isfinite(auto.states))
+    with pytest.raises(ValueError, match="process noise M is singular too"):
+        run_cooperative_filter(positions, meas[1], static, x0, P0, engine="casadi")
+    with pytest.raises(ValueError, match="positive semidefinite"):
+        run_cooperative_filter(positions, meas[1], noise, x0, -P0)
+
+
+def test_coincident_platforms_are_refused_by_the_coloured_filter() -> None:
+    positions = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [0.0, 1.0]])[None] + np.linspace(0, 1, 5)[:, None, None]
+    noise = CooperativeNoise.from_sigmas(0.1, 0.1, 0.1)
+    for method in ("augmented", "differenced"):
+        with pytest.raises(ValueError, match="positions: the spatial-noise covariance W .* is singular"):
+            run_coloured_filter(positions, np.zeros((5, 4)), noise, SpatialNoise(0.3, 2.0), np.zeros(3), np.eye(3),
+                                method=method)  # fmt: skip
+
+
 def test_information_form_equals_joseph_update() -> None:
     rng = np.random.default_rng(2)
     X = rng.normal(size=(5, 3, 3))

@@ -154,6 +154,13 @@ def test_unconstrained_chain_converges_on_noise_free_data_from_a_linear_field() 
     assert np.sqrt(np.mean(errors[False][-20:] ** 2)) < 1e-6
 
 
+def test_a_step_before_start_is_refused() -> None:
+    positions, cells = grid_network(2, 2, (40.0, 40.0), origin=(-40.0, -40.0))
+    network = DistributedFilter(SensorMesh(cells, positions), OPTIONS, 0.1, PdeModel(THETA, V, 1.0))
+    with pytest.raises(RuntimeError, match=r"update\(\) before start\(\)"):
+        network.step(positions, z(positions, 0.0))
+
+
 def test_cell_filter_matches_filterpy() -> None:
     """Algorithm 1 for one cell written again with filterpy's KalmanFilter and the tested building blocks."""
     from filterpy.kalman import KalmanFilter

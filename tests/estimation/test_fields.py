@@ -56,6 +56,21 @@ def test_registry_contains_the_library_fields() -> None:
     assert kinds is FIELDS
 
 
+def test_every_built_in_kind_is_found_in_a_fresh_interpreter() -> None:
+    """``make_field`` before any field module is imported (the registry's built-in entries are lazy)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; from mobisense.estimation import make_field; from mobisense.estimation.fields.base import FIELDS\n"
+        "assert 'mobisense.estimation.fields.library' not in sys.modules\n"
+        "print(type(make_field('quadratic')).__name__, *(FIELDS[k].kind for k in sorted(FIELDS)))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["QuadraticField", *sorted(load_fields())]
+
+
 @pytest.mark.parametrize("kind", sorted(load_fields()))
 def test_derivatives_match_central_differences(kind: str, gridded_path: str) -> None:
     field = _instances(gridded_path)[kind]

@@ -24,6 +24,68 @@ ROOT = Path(__file__).resolve().parents[2]
 SIGMAS = [(0.1, 0.5, 1.0), (1.0, 1.0, 1.0), (0.3, 0.2, 0.0), (2.0, 0.05, 3.0)]
 
 
+def _exact_steady_state(positions: np.ndarray, noise: CooperativeNoise) -> np.ndarray:
+    """P∞(+) to 80 digits: J = C'(DUD' + R)⁻¹C and the doubling algorithm (SDA) on the filter DARE, in mpmath."""
+    import mpmath as mp
+
+    mp.mp.dps = 80
+    centred = [[mp.mpf(float(v)) for v in p] for p in positions - positions.mean(axis=0)]
+    C = mp.matrix([[1, x, y] for x, y in centred])
+    D = mp.matrix([[x * x / 2, x * y / 2, x * y / 2, y * y / 2] for x, y in centred])
+    S = D * mp.matrix(noise.hessian_error.tolist()) * D.T + mp.matrix(noise.measurement_matrix(len(positions)).tolist())
+    J = C.T * mp.inverse(S) * C
+    A, G, H = mp.eye(3), J.copy(), mp.matrix(noise.process.tolist())  # P⁻ = A P⁻ (I + G P⁻)⁻¹ A' + H
+    for _ in range(200):
+        W = mp.inverse(mp.eye(3) + G * H)
+        A, G, H = A * W * A, G + A * W * G * A.T, H + A.T * H * W * A
+        if mp.mnorm(A, 1) < mp.mpf(10) ** -70:
+            break
+    posterior = mp.inverse(mp.inverse(H) + J)
+    return np.array([[float(posterior[i, j]) for j in range(3)] for i in range(3)])
+
+
+@pytest.mark.parametrize(
+    ("positions", "noise", "rtol"),
+    [
+        # a cross of 1000 L with noise in other units: J spans 1e-5 … 2e10 (was refused as "nearly collinear")
+        (cross_formation(1000.0, 1000.0), CooperativeNoise.from_sigmas(10.0, 0.01, 1e-3), 1e-10),
+        # one platform 1e4 L from three at unit distance: cond(DUD' + R) ≈ 1e16 (was refused; scipy's DARE on
+        # the full S is 20 % off, the exactly rounded J with a double-precision DARE 1e-5)
+        (
+            np.array([[1e4, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]]),
+            CooperativeNoise(0.01 * np.eye(3), 0.1, 0.01 * np.eye(4)),
+            1e-7,
+        ),
+        # a formation 5e-5 as wide as long (the narrowest accepted is MIN_ASPECT = 1e-6: error 2e-8 there)
+        (
+            np.array([[0.0, 0.0], [1.0, 1e-4], [2.0, 0.0], [3.0, -1e-4]]),
+            CooperativeNoise.from_sigmas(0.1, 0.2, 0.3),
+            1e-9,
+        ),
+    ],
+    ids=["cross-1000", "far-platform", "thin"],
+)
+def test_ill_conditioned_steady_states_match_an_80_digit_reference(positions, noise, rtol) -> None:  # noqa: ANN001
+    # rtol: about 10x the error measured on each case (1e-11, 7.5e-9, 7e-12), room for another platform's round-off
+    exact = _exact_steady_state(positions, noise)
+    result = steady_state(positions, noise)
+    np.testing.assert_allclose(result.posterior, exact, rtol=0, atol=rtol * np.abs(exact).max())
+
+
+def test_too_thin_a_formation_is_refused_before_the_riccati_equation() -> None:
+    thin = np.array([[0.0, 0.0], [1.0, 1e-7], [2.0, 0.0], [3.0, -1e-7]])  # width 5e-8 of its length
+    with pytest.raises(ValueError, match=r"positions: nearly collinear formation \(width 4\.9e-08 of its length"):
+        steady_state(thin, CooperativeNoise.from_sigmas(0.1, 0.2, 0.3))
+    # without process noise in a direction there is no stabilising solution (its covariance falls like 1/k)
+    singular = CooperativeNoise(np.diag([1e-2, 0.0, 0.0]), 0.04, 0.09 * np.eye(4))
+    with pytest.raises(ValueError, match="noise.process: expected a positive definite M"):
+        steady_state(cross_formation(1.0, 1.0), singular)
+    # the same shape in other units is not refused: only the geometry decides
+    assert np.isfinite(
+        steady_state(1e-3 * cross_formation(1.0, 2.0), CooperativeNoise.from_sigmas(1.0, 1e-3, 1.0)).trace
+    )
+
+
 @pytest.mark.parametrize("sigmas", SIGMAS)
 def test_closed_form_equals_dare_and_is_diagonal(sigmas: tuple[float, float, float]) -> None:
     noise = CooperativeNoise.from_sigmas(*sigmas)
