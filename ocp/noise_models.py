@@ -8,6 +8,7 @@ A model is a pydantic class (its YAML keys) that also supplies the symbolic vari
         model: Literal["exponential"] = "exponential"
         sigma0: PositiveFloat
         length: PositiveFloat
+        n_parameters: ClassVar[int] = 2  # the length of parameters()
 
         def parameters(self) -> list[float]:
             return [self.sigma0, self.length]
@@ -16,10 +17,14 @@ A model is a pydantic class (its YAML keys) that also supplies the symbolic vari
         def variance(p, s, theta):
             return theta[0] * casadi.exp(casadi.sumsqr(p - s) / theta[1] ** 2)
 
-``variance`` receives CasADi expressions: ``p`` (2,) sensor position, ``s`` (2,) the location the row
-measures, ``theta`` the model's numeric parameters (NLP parameters, so sweeps over them need no rebuild).
-It must be positive for every position. An installed package can make its model available to every problem
-file without being imported first, through the entry-point group ``mobisense.noise_models``::
+(with ``from typing import ClassVar, Literal``, ``import casadi``, ``from mobisense.ocp import NoiseModel,
+register_noise_model`` and ``from mobisense.core.config import PositiveFloat``). ``n_parameters`` sizes the
+model's slot in the NLP's parameter vector: a model whose ``parameters()`` returns another number of values is
+refused when a problem naming it is read. ``variance`` receives CasADi expressions: ``p`` (2,) sensor
+position, ``s`` (2,) the location the row measures, ``theta`` the model's numeric parameters (NLP parameters,
+so sweeps over them need no rebuild). It must be positive for every position. An installed package can make
+its model available to every problem file without being imported first, through the entry-point group
+``mobisense.noise_models``::
 
     [project.entry-points."mobisense.noise_models"]
     exponential = "my_package.noise:Exponential"
@@ -111,4 +116,14 @@ def parse_noise(value: Any) -> NoiseModel:
     model = NOISE_MODELS[name]
     if not (isinstance(model, type) and issubclass(model, NoiseModel)):
         raise ValueError(f"noise model {name!r} is registered as {model!r}, which is not a NoiseModel subclass")
-    return model.model_validate(value)
+    parsed = model.model_validate(value)
+    try:
+        count = len(parsed.parameters())
+    except NotImplementedError:
+        raise ValueError(f"noise model {name!r} ({model.__name__}) does not define parameters()") from None
+    if count != model.n_parameters:  # the NLP's parameter vector is sized by n_parameters
+        raise ValueError(
+            f"noise model {name!r} ({model.__name__}): parameters() returns {count} values but n_parameters is "
+            f"{model.n_parameters} (declare n_parameters: ClassVar[int] = {count})"
+        )
+    return parsed

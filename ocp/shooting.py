@@ -21,6 +21,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ..core.interrupts import raise_if_interrupted
+from .direct.iteration_limit import IterationLimit
 from .field import shooting_substeps
 from .mobius import mobius_rk4_step
 from .problem import Problem
@@ -108,6 +110,7 @@ class FieldShooting:
         self.cost_terms = ca.Function("cost_terms", [w, P], [phi, running + energy, energy])
         self.trajectory = ca.Function("trajectory", [w, P], [ca.horzcat(*Zs), ca.horzcat(*pos), ca.horzcat(*vel), U])
         self.solvers: dict[float, Any] = {}
+        self.interrupt: IterationLimit | None = None  # the solvers' iteration callback (created with the first)
         self.build_time_s = time.perf_counter() - t_build
 
     def _constraints(self, pK: Any, vK: Any, U: Any, u_scale: Any) -> tuple[Any, np.ndarray, np.ndarray]:
@@ -196,10 +199,15 @@ class FieldShooting:
                      "mu_init": 1e-2 if self.lbg.size else 1e-1}  # fmt: skip
             if time_limit is not None:
                 ipopt["max_wall_time"] = float(time_limit)
+            if self.interrupt is None:  # stops Ipopt within an iteration of Ctrl-C (one solve can take a minute)
+                self.interrupt = IterationLimit(self.nlp["x"].numel(), self.nlp["g"].numel(), self.nlp["p"].numel())
             self.solvers[key] = ca.nlpsol("field_shooting", "ipopt", self.nlp,
-                                          {"ipopt": ipopt, "print_time": False, "error_on_fail": False})  # fmt: skip
+                                          {"ipopt": ipopt, "print_time": False, "error_on_fail": False,
+                                           "iteration_callback": self.interrupt})  # fmt: skip
         solver = self.solvers[key]
+        raise_if_interrupted()
         sol = solver(x0=w, p=self.parameters(eps, cost_scale), lbg=self.lbg, ubg=self.ubg)
+        raise_if_interrupted()  # Ipopt stopped by the callback: the interrupt, not a result
         stats = solver.stats()
         return np.asarray(sol["x"]).ravel(), {
             "status": str(stats["return_status"]), "success": bool(stats["success"]),

@@ -24,9 +24,11 @@ def solution_warnings(solution: Any, smallest: float) -> list[str]:
                         "filter's covariance — the grid does not resolve it or the optimum is a poor one; try "
                         "more intervals or --multistart K")  # fmt: skip
     if solution.worse_than_baseline:
+        # a grid too coarse for the covariance's decay leaves no plan near coasting in the NLP (stiff_start.py)
+        why = solution.stats.get("coarse_grid") or "a poor local optimum; try --multistart K"
         warnings.append(
             f"the optimum found (J = {solution.cost:.6g}) costs more than not moving (no-control baseline "
-            f"J = {solution.baseline['cost']:.6g}): a poor local optimum; try --multistart K"
+            f"J = {solution.baseline['cost']:.6g}): {why}"
         )
     return warnings
 

@@ -30,6 +30,7 @@ import numpy as np
 from pydantic import Field
 
 from ...core.config import PositiveFloat, Seed, StrictModel, Vector2
+from ...core.interrupts import raise_if_interrupted
 from ...estimation import kalman
 from ...ocp.discretisation import discretise_process
 from ..platforms import PlatformLimits, PlatformLimitsConfig, newton_rates
@@ -256,6 +257,7 @@ def monte_carlo_filter(
     x_hat, P = np.zeros((runs, n, 1)), mats["Sigma0"]
     errors, covariances = [x_hat - x_true], [P]
     for k in range(1, len(times)):
+        raise_if_interrupted()  # a Ctrl-C that arrived inside CasADi code was only recorded
         x_true = F @ x_true + L_Q @ rng.standard_normal((runs, n, 1))
         y = C @ x_true + np.sqrt(R[k])[:, None] * rng.standard_normal((runs, len(R[k]), 1))
         x_hat, P = kalman.predict(x_hat, P, F, Qd)  # docs/theory/cooperative.md, eq. cooperative.6 (same kernels)

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from ...core.config import ConfigError
+from ...core.interrupts import raise_if_interrupted
 from ...estimation.cooperative.information_model import formation_center, rotation
 from ..jacobi import JacobiTransform
 from ..level_curve import LEVEL_FUNCTIONS, LevelCurveController
@@ -334,6 +335,7 @@ def simulate(system: ReplaySystem, seed: int | None = None, progress: bool = Fal
     started = time.perf_counter()
     bar = _progress(progress, steps, s.name)
     for k in range(steps + 1):
+        raise_if_interrupted()  # a Ctrl-C that arrived inside CasADi code (field, estimator) was only recorded
         _adapt_shape(system, y, k)
         _record(rec, system, loop, times[k], y)
         if k == steps:

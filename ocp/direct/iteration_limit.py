@@ -1,19 +1,24 @@
-"""An Ipopt iteration callback that stops a solve once an iteration budget is spent.
+"""An Ipopt iteration callback that stops a solve once an iteration budget is spent, or on Ctrl-C.
 
 CasADi fixes Ipopt's ``max_iter`` when the solver is created; the budget of a homotopy that must not cost
 more than a multiple of a cold solve (docs/theory/direct.md §5.6) is known only at run time. Ipopt calls the
-callback after every iteration; when it returns 1, Ipopt stops with ``User_Requested_Stop``.
+callback after every iteration; when it returns 1, Ipopt stops with ``User_Requested_Stop``. It also returns
+1 once SIGINT or SIGTERM has arrived (:func:`mobisense.core.interrupts.interrupt_received`: a signal during
+Ipopt is only recorded), so that a long solve stops within an iteration; the caller then raises
+(:func:`~mobisense.core.interrupts.raise_if_interrupted`).
 """
 
 from __future__ import annotations
 
 import casadi as ca
 
+from ...core.interrupts import interrupt_received
+
 __all__ = ["IterationLimit"]
 
 
 class IterationLimit(ca.Callback):
-    """Stop after ``limit`` iterations of the current solve (``limit=None``: never).
+    """Stop after ``limit`` iterations of the current solve (``limit=None``: never), or once interrupted.
 
     Parameters
     ----------
@@ -53,6 +58,6 @@ class IterationLimit(ca.Callback):
         return ca.Sparsity.dense(self._sizes.get(ca.nlpsol_out(i), 0), 1)
 
     def eval(self, arg: list) -> list:
-        """Count the iteration; 1 (stop) once more than ``limit`` have been taken."""
+        """Count the iteration; 1 (stop) once more than ``limit`` have been taken or a signal arrived."""
         self.count += 1
-        return [int(self.limit is not None and self.count > self.limit)]
+        return [int(interrupt_received() or (self.limit is not None and self.count > self.limit))]

@@ -20,6 +20,7 @@ from ..simulate import Trajectory, coast
 from ..solution import HomotopyStep, Solution, SolveStatus, StartKind
 from .guesses import initial_guess, state_grid
 from .path_report import constraint_report
+from .stiff_start import coarse_grid_hint
 from .strategy import Continuation, SolveContext, run_strategy, solve_labelled
 from .transcription import DirectCollocation, NLPResult, transcription_for
 
@@ -110,6 +111,9 @@ def solve_direct(
             f"worst-violated constraint: {worst['constraint']} at t = {worst['time']:.4g} "
             f"(violation {worst['violation']:.3g})"
         )
+        hint = coarse_grid_hint(tr, coasting, kept.parameters(1.0), problem.horizon.t0, problem.horizon.tf)
+        if hint:
+            message += f"; {hint}"
     elif not solved:  # the kept start never ran into a failure of its own (its iteration budget was spent first)
         why = "its iteration budget was used up" if kept.exhausted else "it was not run"
         message = f"no start converged at ε = 1: {kept.label} stopped at ε = {kept.eps:g} ({why})"
@@ -118,7 +122,12 @@ def solve_direct(
             last = failures[-1]
             message += f"; the last failure: Ipopt returned {last.status} at ε = {last.eps:g} ({last.start})"
     stats["total_time_s"] = time.perf_counter() - t_start
-    return _assemble(problem, kept, coasting, order, solved, message, stats)
+    solution = _assemble(problem, kept, coasting, order, solved, message, stats)
+    if solution.success and solution.worse_than_baseline:  # the grid may exclude every plan near coasting
+        hint = coarse_grid_hint(tr, coasting, kept.parameters(1.0), problem.horizon.t0, problem.horizon.tf)
+        if hint:
+            solution.stats["coarse_grid"] = hint
+    return solution
 
 
 def solve_starts(problem: Problem, labels: list[str]) -> list[dict[str, Any]]:

@@ -210,6 +210,23 @@ def test_solve_interrupted(tmp_path, sig):
     assert len(outcome.lines) == 1, outcome.stderr
 
 
+@pytest.mark.parametrize(
+    ("command", "example", "after"),
+    [("solve", "field_mapping_10x10", 4.0), ("replay", "replay_isotherm13", 1.0)],
+    ids=["field-solve", "field-replay"],
+)
+def test_long_runs_stop_soon_after_ctrl_c(tmp_path, command, example, after):
+    """One Ipopt solve of a field takes most of its 30 s, a replay's steps call CasADi: Ctrl-C inside either
+    was only recorded and both ran to the end (then exit 130 over a complete result)."""
+    out = tmp_path / "out"
+    outcome = _interrupt(command, [command, example, "--out", str(out)], tmp_path, signal.SIGINT, after)
+    outcome = classify(outcome, 130, ("interrupted",), tmp_path, None)
+    assert outcome.verdict in GOOD, outcome.problems
+    # one L-BFGS iteration or one replay step, then the clean-up (the whole runs take 32 s and 8 s here)
+    assert outcome.seconds < 10, outcome.seconds
+    assert not out.exists()  # the folder the run created is removed: nothing half-done is left
+
+
 def test_solve_killed_then_rerun(tmp_path):
     path = _slow_problem(tmp_path)
     out = tmp_path / "out"
