@@ -23,14 +23,14 @@ otherwise spin-waits in ``sched_yield`` on the tiny dense fronts of MUMPS, which
 worker per core (sweeps), time.
 """
 
-import os
+import os as _os
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+_os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from .core.lazy import lazy_exports  # noqa: E402  (after the environment is set)
+from .core.lazy import lazy_exports as _lazy_exports  # noqa: E402  (after the environment is set)
 from .core.version import __version__  # noqa: E402
 
-__getattr__, __dir__, _names = lazy_exports(
+__getattr__, __dir__, _names = _lazy_exports(
     __name__,
     {
         "ConfigError": "mobisense.core.config",

@@ -171,7 +171,8 @@ def add_budget_argument(parser: argparse.ArgumentParser) -> None:
         type=duration,
         default=None,
         metavar="DURATION",
-        help="refuse to start when the estimated computing time exceeds DURATION (e.g. 6h; default 1h)",
+        help="refuse to start when a lower bound of the computing time exceeds DURATION (e.g. 6h; default 1h); "
+        "not a time limit: solver.time_limit in the problem file (sweep: --time-limit) stops Ipopt",
     )
 
 

@@ -35,5 +35,6 @@ def require_extra(extra: str, feature: str) -> None:
     missing = [name for name in EXTRAS[extra] if importlib.util.find_spec(name) is None]
     if missing:
         raise MissingExtra(
-            f"{feature} needs {', '.join(missing)} (not installed): pip install \"mobisense[{extra}]\""
+            f"{feature} needs {', '.join(missing)} (not installed): pip install \"mobisense[{extra}]\" "
+            f"(from a clone of the repository: pip install \".[{extra}]\")"
         )

@@ -97,7 +97,8 @@ class SolveReporter:
             strategy = solution.stats.get("strategy") or {}
             starts = strategy.get("starts") or []
             if len(starts) > 1:  # several starts (solver.strategy): their steps together
-                table.add_row("starts solved", f"{len(starts)} ({strategy.get('kept')} kept)")
+                reached = sum(start.get("eps_reached") == 1.0 for start in starts)
+                table.add_row("starts tried", f"{len(starts)}, {reached} reached ε = 1 ({strategy.get('kept')} kept)")
                 table.add_row("  Ipopt solves of all starts", f"{len(steps)} (ε steps; ε reached {solution.eps:g})")
             else:
                 table.add_row("Ipopt solves", f"{len(steps)} (ε steps; ε reached {solution.eps:g})")
@@ -114,7 +115,7 @@ class SolveReporter:
             table.add_row(
                 "multi-start",
                 f"{multistart['converged']}/{multistart['starts']} converged; "
-                f"{len(multistart['optima'])} distinct optima: {costs}",
+                f"{_count(len(multistart['optima']), 'distinct optimum', 'distinct optima')}: {costs}",
             )
         table.add_row("output", str(out))
         Console(stderr=False, highlight=False).print(table)
@@ -140,7 +141,8 @@ class SolveReporter:
         rejected = sum(r.get("rejected_steps", 0) for r in steps)
         table.add_row(
             "  continuation in ε",
-            f"{len(steps)} ε steps taken as {indirect['arclength_steps']} arclength steps ({rejected} rejected); "
+            f"{_count(len(steps), 'ε step')} taken as {_count(indirect['arclength_steps'], 'arclength step')} "
+            f"({rejected} rejected); "
             f"{indirect['newton_iterations']} Newton iterations; {folds}",
         )
         table.add_row(
@@ -178,3 +180,8 @@ class SolveReporter:
                     f"{residuals['dH_du']:.1e}, {residuals['transversality']:.1e}, "
                     f"{residuals['hamiltonian_variation']:.1e}",
                 )
+
+
+def _count(number: int, singular: str, plural: str | None = None) -> str:
+    """``"1 ε step"``, ``"3 ε steps"`` (``plural`` when it is not ``singular + "s"``)."""
+    return f"{number} {singular if number == 1 else plural or singular + 's'}"

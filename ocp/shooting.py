@@ -6,7 +6,9 @@ the double integrator is integrated exactly (eq. field.7); Σ is propagated in w
 
     J_ε = ε Tr[M Σ(tf)] + ∫ (α/2 Σ_i |u_i|² + Tr[K Σ]) dt                 (eq. field.8)
 
-is a CasADi MX graph of the K interval calls, so its gradient is the exact discrete adjoint. Ipopt
+(ε times eq. direct.9: the same minimisers, with the terminal term rather than the running cost scaled; the
+homotopy costs are reported as eq. direct.9) is a CasADi MX graph of the K interval calls, so its gradient is
+the exact discrete adjoint. Ipopt
 solves the NLP with a limited-memory BFGS Hessian. Fixed terminal p/v are linear constraints and
 |u_i| ≤ u_max holds exactly at the nodes (|u(t)| is convex on each interval).
 """

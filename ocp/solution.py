@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
-from enum import Enum
 from pathlib import Path
 from typing import Any
 
@@ -23,28 +22,10 @@ from ..core.netcdf_writer import DatasetContent
 from .problem import Problem
 from .solution_file import brief_error, open_solution_file, read_solution_problem
 from .solution_warnings import solution_warnings
+from .solve_outcome import SolveStatus, StartKind
 from .state_layout import StateLayout
 
 __all__ = ["SolveStatus", "StartKind", "HomotopyStep", "TrajectorySample", "Solution"]
-
-
-class SolveStatus(str, Enum):
-    """Outcome of a solve: ``solved`` (ε = 1 reached and converged) or ``failed`` (what was solved is kept)."""
-
-    SOLVED = "solved"
-    FAILED = "failed"
-
-
-class StartKind(str, Enum):
-    """How a direct solve started (``stats["start"]``; the value is what ``summary.json`` shows)."""
-
-    CONTINUATION = "from coasting (solver.strategy)"
-    WARM = "warm start from init"
-    WARM_FAILED = "warm start from init failed; from coasting (solver.strategy)"
-    GUESS = "initial guess, ε = 1 directly"
-    COARSE = "ε-homotopy on the coarse grid (solver.shooting)"
-    INIT_WITHOUT_POINT = "init ignored: it carries no converged ε = 1 NLP point"
-    INIT_OTHER_LAYOUT = "init ignored: different structure or grid"
 
 
 @dataclass

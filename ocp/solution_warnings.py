@@ -8,7 +8,9 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["PLAN_TOLERANCE", "solution_warnings", "plan_warning", "strategy_warning"]
+from .solve_outcome import StartKind
+
+__all__ = ["PLAN_TOLERANCE", "solution_warnings", "plan_warning", "strategy_warning", "init_warning"]
 
 #: relative difference of the optimiser's J from its plan re-integrated (``stats["plan_check"]``) above which the
 #: grid is reported as not resolving the plan (the discretisation error of a resolved grid is far smaller:
@@ -18,7 +20,7 @@ PLAN_TOLERANCE = 1e-5
 
 def solution_warnings(solution: Any, smallest: float) -> list[str]:
     """Every warning that applies to ``solution``, whose Σ(t) has smallest eigenvalue ``smallest``."""
-    warnings = [w for w in (plan_warning(solution), strategy_warning(solution)) if w]
+    warnings = [w for w in (plan_warning(solution), strategy_warning(solution), init_warning(solution)) if w]
     if smallest <= 0:  # a covariance that is not one: the grid or the solve did not follow the Riccati flow
         warnings.append(f"Σ(t) is not positive definite (smallest eigenvalue {smallest:.3g}): not a Kalman "
                         "filter's covariance — the grid does not resolve it or the optimum is a poor one; try "
@@ -73,3 +75,15 @@ def strategy_warning(solution: Any) -> str | None:
            f"ended with {run.get('status')}")  # fmt: skip
     return (f"strategy homotopy: the continuation stopped at ε = {run.get('eps_reached'):g} when it {why}; "
             f"the {strategy.get('kept')} solve's plan is kept")  # fmt: skip
+
+
+def init_warning(solution: Any) -> str | None:
+    """Why the ``init`` a solve was given did not start it (another grid or structure, no converged point)."""
+    start = solution.stats.get("start")
+    if start == StartKind.INIT_OTHER_LAYOUT:
+        return ("init was not used: its NLP has another structure or grid (sensors, states, scheme, degree or K); "
+                "solved from coasting (solver.strategy) as without it")  # fmt: skip
+    if start == StartKind.INIT_WITHOUT_POINT:
+        return ("init was not used: it carries no converged ε = 1 NLP point (a failed solve, or one read from a "
+                "file); solved from coasting (solver.strategy) as without it")  # fmt: skip
+    return None

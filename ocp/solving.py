@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -11,6 +12,7 @@ from ..core.config import ConfigError
 from .problem import Problem, load_problem
 from .registries import METHODS
 from .solution import HomotopyStep, Solution
+from .solution_warnings import init_warning
 
 __all__ = ["solve"]
 
@@ -30,12 +32,13 @@ def solve(
         The problem, or the path of its YAML file (or the name of a shipped example, see
         :func:`mobisense.ocp.problem.load_problem`).
     method : str, optional
-        A name in :data:`mobisense.ocp.registries.METHODS` (``"direct"``, ``"indirect"``, ``"both"``);
-        default ``problem.solver.method``.
+        A name in :data:`mobisense.ocp.registries.METHODS` (``"direct"``, ``"indirect"``, ``"both"``,
+        ``"shooting"`` for fields); default ``problem.solver.method``.
     init : Solution, optional
         A previous solution of a problem of the same structure and grid (e.g. with other weights):
         its primal–dual point warm-starts ε = 1 directly (continuation from the coasting solution if
-        that fails) — continuation as plain data flow.
+        that fails) — continuation as plain data flow. One of another structure or grid, or without a
+        converged point, is not used: the solve runs as without it and a ``UserWarning`` says so.
     progress : callable, optional
         Called with each :class:`~mobisense.ocp.solution.HomotopyStep` as it finishes.
 
@@ -60,4 +63,6 @@ def solve(
     from .direct.plan_check import record_plan_check
 
     record_plan_check(solution)  # a direct plan: its J checked independently
+    if init is not None and (unused := init_warning(solution)):
+        warnings.warn(unused, UserWarning, stacklevel=2)
     return solution

@@ -20,6 +20,10 @@ compiling the kernels of n = 4, N = 2 takes 12–45 s, far more than the solve: 
 generates and compiles them into the cache, while this process evaluates them in the virtual machine
 (the same numbers, ≈ 2× slower evaluations); the next process with the same key loads the library. A
 marker file keeps concurrent processes from compiling the same key twice (stale after 10 minutes).
+
+A library's modification time is its last use (touched when loaded); after every build, all but the
+:data:`CACHE_MAX_LIBRARIES` most recently used are removed (:func:`prune`), so editing the equations or solving
+many structures does not fill the disk.
 """
 
 from __future__ import annotations
@@ -45,6 +49,8 @@ __all__ = [
     "source_digest",
     "load_compiled",
     "compile_library",
+    "prune",
+    "CACHE_MAX_LIBRARIES",
 ]
 
 #: environment variable naming the cache folder
@@ -57,6 +63,9 @@ STALE_MARKER_S = 600.0
 #: leaves its compile to a later run (a test suite or sweep meeting many structures would otherwise start a
 #: C compiler for each, all at once)
 MAX_BACKGROUND_COMPILES = 1
+#: libraries kept in the cache folder: beyond this many, the least recently used (loaded or built) are removed
+#: after a build (a library is 0.1–2 MB; every version of the equations and every structure adds one)
+CACHE_MAX_LIBRARIES = 200
 
 
 def cache_folder() -> Path:
@@ -144,6 +153,7 @@ def load_compiled(
     library = folder / f"kernels_{digest}.so"
     loaded = _load(library, functions)
     if loaded is not None:
+        _touch(library)  # its modification time is its last use: the least recently used go first (_prune)
         return loaded, "compiled (cached)"
     if background:
         return functions, _start_background(functions, folder, digest, full_key, compiler)
@@ -182,6 +192,7 @@ def _compile(source: Path, library: Path, full_key: str, compiler: str) -> str |
             return "compiling failed: " + (run.stderr.strip().splitlines() or ["no message"])[0]
         os.replace(target, library)  # atomic: a concurrent run sees the old library or the new one, never half
         library.with_suffix(".json").write_text(json.dumps({"key": full_key}, indent=1), encoding="utf-8")
+        prune(library.parent)
     except OSError as err:
         return f"cache folder {library.parent} not writable: {err.strerror}"
     finally:
@@ -210,10 +221,50 @@ def _start_background(
     except (OSError, RuntimeError) as err:
         return f"virtual machine (cache folder {folder} not writable: {err})"
     args = [sys.executable, "-m", __name__, str(folder / f"kernels_{digest}.so"), full_key, compiler, *saved]
-    subprocess.Popen(
-        args, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
-    )
+    _detach(args)
     return "virtual machine (compiling in the background for the next run)"
+
+
+def _detach(args: list[str]) -> None:
+    """Start ``args`` in a new session, not as a child of this process (no zombie, no ResourceWarning).
+
+    A shell starts it in the background and exits at once; the compile is then adopted by init. Without a
+    POSIX shell, a plain detached child.
+    """
+    quiet = {"stdin": subprocess.DEVNULL, "stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    shell = shutil.which("sh")
+    if shell is None:
+        subprocess.Popen(args, start_new_session=True, **quiet)  # noqa: S603
+        return
+    subprocess.run([shell, "-c", '"$@" &', "sh", *args], start_new_session=True, check=False, **quiet)  # noqa: S603
+
+
+def _touch(library: Path) -> None:
+    try:
+        os.utime(library)
+    except OSError:  # a read-only cache still serves its libraries
+        pass
+
+
+def prune(folder: Path, keep: int = CACHE_MAX_LIBRARIES) -> list[Path]:
+    """Remove all but the ``keep`` most recently used libraries (and their key files) of ``folder``; the removed.
+
+    Removing a library another process has loaded is safe (the mapping stays until it exits); one that a
+    process was about to load is compiled again.
+    """
+    libraries = []
+    for path in folder.glob("kernels_*.so"):
+        try:
+            libraries.append((path.stat().st_mtime, path))
+        except OSError:  # removed meanwhile
+            pass
+    libraries.sort(reverse=True)
+    removed = []
+    for _, path in libraries[keep:]:
+        for file in (path, path.with_suffix(".json")):
+            file.unlink(missing_ok=True)
+        removed.append(path)
+    return removed
 
 
 def _compiles_running(folder: Path) -> int:

@@ -27,6 +27,11 @@ from .transcription import DirectCollocation, NLPResult, transcription_for
 __all__ = ["solve_direct", "solve_starts"]
 
 
+#: largest scaled constraint violation of a failed solve not blamed on a constraint (Ipopt stopped for another
+#: reason, e.g. its iteration limit, with the dynamics and path constraints satisfied)
+FEASIBLE_VIOLATION = 1e-6
+
+
 def _worst_violation(tr: DirectCollocation, result: NLPResult, problem: Problem) -> dict[str, Any]:
     _, _, lbg, ubg = tr.bounds()
     violation = np.maximum(np.maximum(lbg - result.g, result.g - ubg), 0.0)
@@ -106,11 +111,12 @@ def solve_direct(
     if not solved and kept.failed is not None:
         worst = _worst_violation(tr, kept.failed, problem)
         stats["worst_violation"] = worst
-        message = (
-            f"Ipopt returned {kept.failed.status} at ε = {kept.steps[-1].eps:g}; last ε solved = {kept.eps:g}; "
-            f"worst-violated constraint: {worst['constraint']} at t = {worst['time']:.4g} "
-            f"(violation {worst['violation']:.3g})"
-        )
+        where = f"{worst['constraint']} at t = {worst['time']:.4g}"
+        message = f"Ipopt returned {kept.failed.status} at ε = {kept.steps[-1].eps:g}; last ε solved = {kept.eps:g}; "
+        if worst["violation"] <= FEASIBLE_VIOLATION:  # not a constraint's doing: the optimality conditions
+            message += f"every constraint holds to {worst['violation']:.3g} (the largest: {where}): not optimal yet"
+        else:
+            message += f"worst-violated constraint: {where} (violation {worst['violation']:.3g})"
         hint = coarse_grid_hint(tr, coasting, kept.parameters(1.0), problem.horizon.t0, problem.horizon.tf)
         if hint:
             message += f"; {hint}"

@@ -213,7 +213,10 @@ def test_a_missing_extra_is_one_line_saying_what_to_install(monkeypatch, capsys)
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "dask" else real(name, *a))
     assert cli.main(["sweep", str(PROBLEMS / "sweep_hussein2008.yaml")]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == 'mobisense: error: mobisense sweep needs dask (not installed): pip install "mobisense[sweep]"'
+    assert err == (
+        'mobisense: error: mobisense sweep needs dask (not installed): pip install "mobisense[sweep]" '
+        '(from a clone of the repository: pip install ".[sweep]")'
+    )
 
 
 def test_the_default_install_leaves_the_sweep_dependencies_to_the_extra():

@@ -64,7 +64,8 @@ def test_solve_writes_the_contract(tmp_path, capsys):
     assert "improvement" in stdout
     # the table counts the starts and names the kept one (the ε steps are those of all the starts)
     starts = len(summary["strategy"]["starts"])
-    assert re.search(rf"starts solved\s*│\s*{starts} \({kept} kept\)", stdout)
+    reached = sum(start["eps_reached"] == 1.0 for start in summary["strategy"]["starts"])
+    assert re.search(rf"starts tried\s*│\s*{starts}, {reached} reached ε = 1 \({kept} kept\)", stdout)
     assert re.search(rf"Ipopt solves of all starts\s*│\s*{len(summary['homotopy'])} \(ε steps; ε reached 1\)", stdout)
     assert not list(out.glob(".*.tmp"))
 
@@ -184,6 +185,17 @@ def test_intervals_set_the_grid_of_the_method_that_solves():
     collocated = apply_overrides({**field, "solver": {"method": "direct"}}, args)["solver"]
     assert collocated["collocation"]["intervals"] == 30 and "shooting" not in collocated
     assert apply_overrides(hussein2008(), args)["solver"]["collocation"]["intervals"] == 30
+
+
+def test_a_failure_with_every_constraint_satisfied_does_not_blame_one() -> None:
+    # 5 iterations leave the cold step feasible to 3.5e-7 (scaled) but not optimal: naming the "worst-violated
+    # constraint" sent the reader after a constraint that holds
+    import mobisense as ms
+
+    solution = ms.solve(ms.Problem.from_dict(hussein2008(max_iterations=5, collocation={"intervals": 30})))
+    assert solution.status == "failed" and "Maximum_Iterations_Exceeded" in solution.message
+    assert "every constraint holds to" in solution.message and "worst-violated" not in solution.message
+    assert solution.stats["worst_violation"]["violation"] <= 1e-6
 
 
 def test_solver_failure_keeps_results_and_names_the_constraint(tmp_path, capsys):

@@ -149,6 +149,18 @@ def test_terminal_position_and_control_bound_hold():
     assert np.linalg.norm(solution.u[:, 0], axis=1).max() <= 0.8 * (1 + 1e-6)
 
 
+def test_homotopy_costs_are_those_of_the_direct_method():
+    """summary.json's homotopy costs are J_ε of eq. direct.9 (Φ + E/ε) for every method, not eq. field.8's ε Φ + E.
+
+    The optimal Φ + E/ε cannot increase with ε (every plan's does not), while ε Φ + E of the same plans
+    grows with ε: at the shooting's coarse steps (one grid, Ipopt tolerance 1e-6 relative) the reported costs
+    must not increase (they did, 0.0134 at ε = 0.03 against 0.30 at ε = 1, before)."""
+    solution = ms.solve(_problem(solver={"shooting": {"intervals": 20, "coarse_intervals": 10}}))
+    coarse = [s.cost for s in solution.homotopy[:-1]]  # the coarse grid's ε steps; the last is the fine solve
+    assert len(coarse) >= 3 and all(b <= a * (1 + 1e-6) for a, b in zip(coarse, coarse[1:], strict=False))
+    assert coarse[0] > solution.cost
+
+
 @pytest.mark.slow
 def test_shooting_agrees_with_the_direct_collocation():
     # n = 4, N = 1. Collocation (Radau-3) at K = 40 against shooting at K = 200 (its error ~ 1e-10 at the

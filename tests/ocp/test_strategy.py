@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 
 import casadi as ca
@@ -106,6 +107,22 @@ def test_background_compile_serves_the_next_run(tmp_path):
     point = [0.3, -1.2, 2.0]
     np.testing.assert_allclose(np.asarray(loaded["bg_kernel"](point)), np.asarray(functions["bg_kernel"](point)))
     assert not list(tmp_path.glob(".kernels_*"))  # saved functions, source and marker removed
+
+
+def test_the_cache_keeps_the_most_recently_used_libraries(tmp_path):
+    from mobisense.ocp.direct.kernel_cache import prune
+
+    for k in range(5):  # five libraries, used k seconds apart (the oldest first), each with its key file
+        library = tmp_path / f"kernels_{k:020d}.so"
+        library.write_bytes(b"x")
+        library.with_suffix(".json").write_text("{}")
+        os.utime(library, (1000.0 + k, 1000.0 + k))
+    os.utime(tmp_path / f"kernels_{0:020d}.so", (2000.0, 2000.0))  # the oldest was loaded again last
+    removed = prune(tmp_path, keep=3)
+    assert sorted(p.name for p in removed) == [f"kernels_{1:020d}.so", f"kernels_{2:020d}.so"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        f"kernels_{k:020d}.{ext}" for k in (0, 3, 4) for ext in ("so", "json")
+    )
 
 
 def test_when_no_start_converges_the_one_that_got_furthest_is_kept():
