@@ -64,7 +64,7 @@ class ReplayCommand:
         parser.add_argument(
             "--animate", action="store_true", help="also write replay.mp4 (or .gif) of a field replay"
         )
-        parser.add_argument("--quiet", action="store_true", help="no progress bar")
+        parser.add_argument("--quiet", action="store_true", help="no progress bar or summary lines (as solve)")
         add_budget_argument(parser)
 
     @staticmethod
@@ -134,7 +134,8 @@ def _simulate(args: argparse.Namespace, kind: str, run: Callable[[Any], Any]) ->
             return 1
         with numerical_failures(f"writing the results of {source}"):
             result.save(folder.path, figures=not args.no_plot)
-        result.report(folder.path)
+        if not getattr(args, "quiet", False):
+            result.report(folder.path)
     if result.summary.get("warning"):
         print(f"mobisense: warning: {result.summary['warning']}", file=sys.stderr)
     status = result.summary.get("status", "ok")

@@ -58,6 +58,15 @@ def test_field_replay_writes_result_summary_figures_and_animation(tmp_path, caps
     assert "replay_two_charges" in capsys.readouterr().out
 
 
+def test_quiet_replay_prints_nothing_but_writes_everything(tmp_path, capsys):
+    data = shipped("replay_two_charges")
+    data.update(duration=0.5)
+    out = tmp_path / "out"
+    assert main(["replay", str(write(tmp_path, data)), "--out", str(out), "--quiet", "--no-plot"]) == 0
+    assert capsys.readouterr().out == ""  # as solve --quiet: no progress, no summary lines
+    assert (out / "summary.json").is_file() and (out / "result.nc").is_file()
+
+
 @pytest.mark.slow
 def test_shape_from_a_steady_state_summary(tmp_path):
     formation = {"formation": "cross", "noise": {"sigma_process": 0.02, "sigma_measurement": 0.05,
