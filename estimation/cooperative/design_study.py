@@ -74,12 +74,15 @@ class FormationFile(StrictModel):
                     "positions", f"expected at most {MAX_POSITIONS} platforms (the steady state of N platforms "
                     f"needs N × N matrices and N³ operations), got {len(self.positions)}"
                 )  # fmt: skip
+            from .steady_state import MIN_ASPECT
+
             arr = np.asarray(self.positions, dtype=float)
-            offsets = arr - arr.mean(axis=0)
-            if len(arr) < 3 or np.linalg.matrix_rank(offsets, tol=1e-9 * max(1.0, np.abs(offsets).max())) < 2:
+            spread = np.linalg.svd(arr - arr.mean(axis=0), compute_uv=False) if len(arr) >= 2 else np.zeros(2)
+            if len(arr) < 3 or not spread[1] >= MIN_ASPECT * spread[0] or spread[0] == 0:
                 raise InvalidValue(
-                    "positions", f"expected >= 3 platforms not all on one line, got {brief(self.positions)}"
-                )
+                    "positions", f"expected >= 3 platforms not all on or near one line (width at least {MIN_ASPECT:g} "
+                    f"of the length), got {brief(self.positions)}"
+                )  # fmt: skip
         if self.formation == "cross" and self.bounds is not None:
             from .steady_state import cross_information
 

@@ -241,7 +241,10 @@ def test_cli_custom_formation_and_invalid_files(tmp_path: Path, capsys: pytest.C
         "order.yaml": ("formation: cross\nnoise: {sigma_process: 0.1, sigma_measurement: 0.5}\n"
                        "bounds: {a: [3.0, 0.2], b: [0.2, 3.0]}\n", "bounds.a: expected [min, max]"),
         "line.yaml": ("formation: custom\nnoise: {sigma_process: 0.1, sigma_measurement: 0.5}\n"
-                      "positions: [[0, 0], [1, 0], [2, 0]]\n", "not all on one line"),
+                      "positions: [[0, 0], [1, 0], [2, 0]]\n", "not all on or near one line"),
+        # width 5e-10 of the length: below MIN_ASPECT, where the steady state loses its digits to round-off
+        "thin.yaml": ("formation: custom\nnoise: {sigma_process: 0.1, sigma_measurement: 0.5}\n"
+                      "positions: [[0, 0], [1, 1.0e-9], [2, 0], [3, -1.0e-9]]\n", "not all on or near one line"),
         "nobounds.yaml": ("noise: {sigma_process: 0.1, sigma_measurement: 0.5}\n", "bounds: required"),
     }  # fmt: skip
     for name, (text, message) in bad.items():
