@@ -42,17 +42,18 @@ def plan_warning(solution: Any) -> str | None:
     the collocation; None when it is within the tolerance or was not run.
     """
     check = solution.stats.get("plan_check")
-    if not check or solution.collocation is None:
+    if not check:
         return None
     if check.get("cost") is None:
         return f"the plan check could not re-integrate this plan ({check.get('integrator')}): J is unchecked"
     difference = check["relative_difference"]
     if difference is None or abs(difference) <= PLAN_TOLERANCE:
         return None
+    intervals = solution.collocation[2] if solution.collocation is not None else solution.stats.get("intervals")
     return (
         f"the grid does not resolve this plan: its controls re-integrated give J = {check['cost']:.8g}, "
         f"{100 * abs(difference):.3g} % {'below' if difference > 0 else 'above'} the optimiser's (relative "
-        f"difference {difference:+.2g}, beyond ±{PLAN_TOLERANCE:g}); solve on more than K = {solution.collocation[2]} "
+        f"difference {difference:+.2g}, beyond ±{PLAN_TOLERANCE:g}); solve on more than K = {intervals} "
         "intervals (--intervals) before trusting J or the choice between starts"
     )
 

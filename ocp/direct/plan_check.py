@@ -47,6 +47,16 @@ def check_plan(solution: Solution) -> dict[str, Any]:
 
 
 def record_plan_check(solution: Solution) -> None:
-    """Store :func:`check_plan` as ``solution.stats["plan_check"]`` for a solved direct solution (else nothing)."""
-    if solution.success and solution.collocation is not None:
+    """Store the plan check as ``solution.stats["plan_check"]`` for a solved solution (else nothing).
+
+    :func:`check_plan` for a direct solution, :func:`mobisense.ocp.field_plan_check.check_field_plan` for a
+    field's shooting solution; the indirect method's J is not a plan's.
+    """
+    if not solution.success:
+        return
+    if solution.collocation is not None:
         solution.stats["plan_check"] = check_plan(solution)
+    elif solution.method == "shooting":
+        from ..field_plan_check import check_field_plan
+
+        solution.stats["plan_check"] = check_field_plan(solution)

@@ -63,6 +63,25 @@ def test_nothing_measured_keeps_the_stationary_prior():
     assert np.abs(Sigma - Ks).max() < 1e-12  # beyond the cut-off the rows are 1e-20σ²: Σ' = 0 to rounding
 
 
+def test_the_plan_check_of_a_field_solution_is_an_independent_integration():
+    """summary.json's plan_check of a shooting solution: its controls re-integrated by scipy's DOP853 in numpy."""
+    far = _problem(sensors=[{"name": "far", "p0": [900.0, 900.0], "v0": [0, 0], "measures": "point",
+                             "noise": {"model": "constant", "variance_value": 0.1}}])  # fmt: skip
+    solution = ms.solve(far)  # nothing to measure: Σ stays Kₛ whatever the plan, J = Tr[M Kₛ] + α/2 ∫|u|²
+    check = solution.stats["plan_check"]
+    mats = far.matrices()
+    exact = float(np.trace(mats["M"] @ mats["Sigma0"])) + solution.control_energy
+    assert check["integrator"].startswith("DOP853") and check["cost"] == pytest.approx(exact, rel=1e-10)
+    # on a plan that measures, the difference is the shooting's own error: one RK4 step per interval, order 4,
+    # so doubling K divides it by ≳ 16 (measured 2.0e-5 → 5.9e-7 → 2.3e-8 at K = 10, 20, 40: the optimal plans
+    # change with K too) — the check is not the shooting's integration again
+    differences = []
+    for K in (10, 20):
+        coarse = ms.solve(_problem(solver={"shooting": {"intervals": K, "substeps": 1, "coarse_intervals": 10}}))
+        differences.append(abs(coarse.stats["plan_check"]["relative_difference"]))
+    assert differences[0] > 1e-9 and differences[0] / differences[1] > 8, differences
+
+
 def _cubic_positions(problem, t_nodes, u):
     """p(t) of the exact double integrator with piecewise-linear u (independent of eq. field.7)."""
     p0 = np.array([s.p0 for s in problem.sensors], float)
