@@ -84,6 +84,8 @@ class Registry(Mapping[str, T], Generic[T]):
         return sorted(self._entries)
 
     def __contains__(self, name: object) -> bool:
+        if not isinstance(name, str):  # a list or mapping from a file is no name (and unhashable)
+            return False
         if name not in self._entries:
             self._scan_entry_points()
         return name in self._entries

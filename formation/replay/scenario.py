@@ -38,6 +38,7 @@ from ...core.config import (
     Vector2,
     parse_config,
 )
+from ...core.errors import brief
 from ...core.units import LengthUnit, PhysicalUnit, TimeUnit
 from ...estimation.cooperative.information_model import cross_formation
 from ...estimation.cooperative.noise_config import NoiseConfig
@@ -66,8 +67,8 @@ def _parse_kind(value: Any, registry: dict[str, type[StrictModel]], what: str) -
         return value
     if not isinstance(value, dict) or "kind" not in value:
         raise ValueError(f"expected a mapping with 'kind' one of {sorted(registry)} ({what})")
-    if value["kind"] not in registry:
-        raise InvalidValue("kind", f"unknown {what} {value['kind']!r}; expected one of {sorted(registry)}")
+    if not isinstance(value["kind"], str) or value["kind"] not in registry:  # a list or mapping is unhashable
+        raise InvalidValue("kind", f"unknown {what} {brief(value['kind'])}; expected one of {sorted(registry)}")
     try:
         return parse_config(value, registry[value["kind"]], source="@")
     except ConfigError as err:  # re-raise relative to this key, keeping the message and suggestion

@@ -173,6 +173,9 @@ BAD = [
         "motion.level: the reciprocal level function needs C > 0",
     ),
     ("replay_two_charges", _delete(["field"]), "expected a field replay (key 'field')"),
+    # a list or a mapping where a kind is named: unhashable, it was an internal error (found by a fuzzer)
+    ("replay_two_charges", _set(["formation", "kind"], ["rotating"]), "formation.kind: unknown formation ['rotating']"),
+    ("replay_two_charges", _set(["motion", "kind"], {"a": 1}), "motion.kind: unknown motion {'a': 1}"),
     (  # a kind that is none of replay's, on a file without the keys of one: the kind is named, not the shape
         "replay_two_charges",
         lambda d: {"kind": 3, **{k: v for k, v in _delete(["field"])(d).items() if k != "kind"}},
