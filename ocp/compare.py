@@ -111,6 +111,8 @@ class ComparedSolution(Solution):
 
         content.add_coord("time_indirect", ("time_indirect",), other.t, variable_attrs(self, "time_indirect"))
         for name in ("Sigma", "p", "v", "u", "Lam", "lam_p", "lam_v"):  # on the BVP's nodes, the controls too
+            if getattr(other, name) is None:  # an indirect solve that failed before its first BVP has no costates
+                continue
             dim = ("time_indirect", *DIMENSIONS[name][1:])
             attrs = variable_attrs(self, name, " (indirect solution)")
             content.add_variable(f"indirect_{name}", dim, getattr(other, name), attrs)

@@ -32,6 +32,8 @@ __all__ = [
     "Workspace",
     "PathConstraints",
     "POLYGON_MARGIN",
+    "MAX_KEEP_OUT",
+    "MAX_POLYGON_VERTICES",
     "path_structure",
     "path_parameter_blocks",
     "path_parameter_values",
@@ -45,6 +47,10 @@ __all__ = [
 
 #: the smooth outside-of-polygon row is conservative by at most this fraction of √area (eq. path.2)
 POLYGON_MARGIN = 0.02
+#: most keep-out zones and polygon vertices a problem may have: each zone adds a row per sensor at every
+#: collocation node, each vertex terms to its row (2000 discs at K = 20 built for minutes before Ctrl-C could act)
+MAX_KEEP_OUT = 100
+MAX_POLYGON_VERTICES = 64
 
 
 class KeepOutDisc(StrictModel):
@@ -125,12 +131,25 @@ class PathConstraints(StrictModel):
     def _zone_shapes(cls, data: Any) -> Any:
         """Each zone is a mapping of a disc's keys or a polygon's, not both and nothing else."""
         zones = data.get("keep_out") if isinstance(data, dict) else None
+        if isinstance(zones, list) and len(zones) > MAX_KEEP_OUT:
+            raise InvalidValue("keep_out", f"expected at most {MAX_KEEP_OUT} zones (each adds a row per sensor at "
+                               f"every collocation node), got {len(zones)}")  # fmt: skip
+        seen: dict[str, int] = {}
         for k, zone in enumerate(zones if isinstance(zones, list) else []):
             expected = "a disc {center: [x, y], radius: r} or a convex polygon {polygon: [[x, y], …]}"
+            if isinstance(zone, dict):
+                key = repr(sorted(zone.items()))
+                if key in seen:  # its rows would duplicate another's: a degenerate NLP (Ipopt stalls on it)
+                    raise InvalidValue(f"keep_out[{k}]", f"repeats keep_out[{seen[key]}]; give each zone once")
+                seen[key] = k
             if not isinstance(zone, dict):
                 raise InvalidValue(f"keep_out[{k}]", f"expected {expected}, got {brief(zone)}")
             if "polygon" in zone and ({"center", "radius"} & set(zone)):
                 raise InvalidValue(f"keep_out[{k}]", f"expected {expected}, got both kinds' keys: {sorted(zone)}")
+            polygon = zone.get("polygon")
+            if isinstance(polygon, list) and len(polygon) > MAX_POLYGON_VERTICES:
+                raise InvalidValue(f"keep_out[{k}].polygon", f"expected at most {MAX_POLYGON_VERTICES} vertices, "
+                                   f"got {len(polygon)}")  # fmt: skip
         return data
 
 

@@ -72,7 +72,8 @@ class BVPOptions(StrictModel):
     tolerance: float = Field(1e-10, gt=0.0, lt=1e-2)
     newton_iterations: int = Field(50, ge=1, le=10_000)
     max_arclength_steps: int = Field(400, ge=1, le=100_000)
-    scipy_tolerance: float = Field(1e-8, gt=0.0, lt=1e-2, description="solve_bvp tol (relative residual)")
+    # solve_bvp raises anything below 100 machine epsilons to that, with a warning: refused instead
+    scipy_tolerance: float = Field(1e-8, ge=2.3e-14, lt=1e-2, description="solve_bvp tol (relative residual)")
     max_nodes: int = Field(
         20_000, ge=10, le=10_000_000, description="solve_bvp mesh limit (bounds the time of a failing step)"
     )

@@ -256,6 +256,8 @@ class LeaderFollowerScenario(StrictModel):
     @model_validator(mode="after")
     def _consistent(self) -> LeaderFollowerScenario:
         n_steps = self.duration / self.step
+        if self.step > self.duration:  # no step would be taken (was an internal error)
+            raise InvalidValue("step", f"expected at most duration = {self.duration}, got {self.step}")
         if abs(n_steps - round(n_steps)) > 1e-9 * max(1.0, n_steps):
             raise InvalidValue("step", f"expected a divisor of duration = {self.duration}, got {self.step}")
         if isinstance(self.reference, ConstantReferenceConfig) and self.reference.distance_from_run is not None:

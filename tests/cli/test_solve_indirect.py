@@ -79,3 +79,21 @@ def test_indirect_rejects_control_bounds_before_writing(tmp_path, capsys):
     assert code == 2
     assert "sensors[0].u_max" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_both_with_an_indirect_solve_that_fails_at_once_keeps_the_direct_solution(tmp_path, capsys):
+    # Σ0 = 1e12: the ε = 0 BVP has a non-finite residual, so the indirect solution has no costates; writing
+    # solution.nc failed on them (internal error, nothing written; found by a mutation fuzzer)
+    import yaml
+
+    data = yaml.safe_load((PROBLEMS / "hussein2008.yaml").read_text())
+    data["process"]["Sigma0"] = [[1e12]]
+    data["solver"].update(method="both", collocation={"scheme": "radau", "degree": 3, "intervals": 20})
+    path = tmp_path / "p.yaml"
+    path.write_text(yaml.safe_dump(data))
+    out = tmp_path / "out"
+    assert cli.main(["solve", str(path), "--out", str(out), "--quiet", "--no-plot"]) == 1
+    err = capsys.readouterr().err
+    assert "indirect:" in err and "internal error" not in err
+    loaded = Solution.load(out)  # the direct solution, readable
+    assert np.isfinite(loaded.cost) and json.loads((out / "summary.json").read_text())["status"] == "failed"

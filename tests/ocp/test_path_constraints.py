@@ -72,6 +72,14 @@ def test_resimulation_is_exact_for_a_constant_control() -> None:
          "sensors[0].terminal.v: expected a terminal speed within constraints.max_speed 2.5, got 3"),
         ({"constraints": {"workspace": {"x": [1, 0], "y": [0, 1]}}}, "constraints.workspace.x"),
         ({"constraints": {"max_speed": 3.0}, "solver": {"method": "indirect"}}, "constraints"),
+        # hostile sizes and repeats (a fuzzer's: 2000 copies of a disc through a YAML anchor ran for minutes)
+        ({"constraints": {"keep_out": [{"center": [50.0 + k, 50.0], "radius": 0.1} for k in range(101)]}},
+         "constraints.keep_out: expected at most 100 zones"),
+        ({"constraints": {"keep_out": [{"polygon": [[50 + float(np.cos(a)), 50 + float(np.sin(a))]
+                                                    for a in np.linspace(0, 6.2, 65)]}]}},
+         "constraints.keep_out[0].polygon: expected at most 64 vertices, got 65"),
+        ({"constraints": {"keep_out": [{"center": [6.5, 4.5], "radius": 2.0}] * 2}},
+         "constraints.keep_out[1]: repeats keep_out[0]"),
     ],
 )
 def test_bad_constraints_exit_2_with_the_key_path(tmp_path, capsys, edit, key) -> None:
