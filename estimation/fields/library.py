@@ -21,6 +21,7 @@ from __future__ import annotations
 import difflib
 import importlib
 import inspect
+import math
 import re
 from collections.abc import Sequence
 from pathlib import Path
@@ -30,6 +31,7 @@ import numpy as np
 from pydantic import ConfigDict, PrivateAttr, ValidationInfo, model_validator
 
 from ...core.config import InvalidValue, StrictModel
+from ...core.errors import brief
 from .base import FIELDS, Field, make_field, register_field
 
 __all__ = ["QuadraticField", "TwoChargesField", "OceanTemperatureField", "FieldSpec", "grid_dataset", "load_fields"]
@@ -259,6 +261,23 @@ def load_fields() -> dict[str, type[Field]]:
     return FIELDS
 
 
+def _non_finite(value: Any, path: str) -> str | None:
+    """The key path of the first NaN or infinite number in a nested parameter value, or None."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return path
+    if isinstance(value, (list, tuple)):
+        for i, item in enumerate(value):
+            where = _non_finite(item, f"{path}[{i}]")
+            if where is not None:
+                return where
+    if isinstance(value, dict):
+        for key, item in value.items():
+            where = _non_finite(item, f"{path}.{key}")
+            if where is not None:
+                return where
+    return None
+
+
 def _scenario_folder(info: ValidationInfo) -> Path | None:
     """The folder of the file being validated: ``context={"source": FILE}`` of ``model_validate``, if a file."""
     context = info.context if isinstance(info.context, dict) else {}
@@ -306,6 +325,10 @@ class FieldSpec(StrictModel):
                     f"(allowed: {', '.join(allowed)})",
                 )
         parameters = self.parameters()
+        for key, value in parameters.items():  # NaN or ±inf in a field's numbers: refused, as everywhere else
+            where = _non_finite(value, key)
+            if where is not None:
+                raise InvalidValue(where, f"expected finite numbers, got {brief(value)}")
         folder = _scenario_folder(info)
         for key in getattr(kinds[self.kind], "file_parameters", ()):
             value = parameters.get(key)

@@ -101,6 +101,15 @@ class PlatformsConfig(StrictModel):
     max_speed: PositiveFloat | None = None
     initial: InitialState
 
+    @model_validator(mode="after")
+    def _initial_speed(self) -> PlatformsConfig:
+        """A start faster than ``max_speed`` (1e12 L/T: the integrator crawled through the saturation for minutes)."""
+        speed = float(np.hypot(*self.initial.velocity))
+        if self.max_speed is not None and speed > self.max_speed:
+            raise InvalidValue("initial.velocity", f"expected a speed at most max_speed = {self.max_speed:g}, got "
+                               f"{speed:.6g}")  # fmt: skip
+        return self
+
 
 class ShapeGains(StrictModel):
     """``u_j = q_j^d'' − K2 (q_j − q_j^d) − K3 (q_j' − q_j^d')``: ``stiffness`` K2 (1/T²), ``damping`` K3."""

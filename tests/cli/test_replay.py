@@ -173,7 +173,13 @@ BAD = [
         "motion.level: the reciprocal level function needs C > 0",
     ),
     ("replay_two_charges", _delete(["field"]), "expected a field replay (key 'field')"),
-    # a list or a mapping where a kind is named: unhashable, it was an internal error (found by a fuzzer)
+    # found by a mutation fuzzer: non-finite field numbers ran (exit 1, numpy warnings); a start faster than
+    # max_speed crawled through the saturation for minutes; a list or mapping as a kind was an internal error
+    ("replay_two_charges", _set(["field", "charges"], [[float("nan"), 0.0], [3.0, 0.0]]),
+     "field.charges[0][0]: expected finite numbers"),
+    ("replay_two_charges", _set(["field", "strength"], float("inf")), "field.strength: expected finite numbers"),
+    ("replay_isotherm13", _set(["platforms", "initial", "velocity"], [1e12, 0.0]),
+     "platforms.initial.velocity: expected a speed at most max_speed"),
     ("replay_two_charges", _set(["formation", "kind"], ["rotating"]), "formation.kind: unknown formation ['rotating']"),
     ("replay_two_charges", _set(["motion", "kind"], {"a": 1}), "motion.kind: unknown motion {'a': 1}"),
     (  # a kind that is none of replay's, on a file without the keys of one: the kind is named, not the shape
