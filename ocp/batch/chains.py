@@ -15,6 +15,8 @@ cores) is paid once per link, not once per warm solve (≈ 10 ms).
 
 from __future__ import annotations
 
+import math
+from collections.abc import Collection
 from typing import Any
 
 import numpy as np
@@ -22,9 +24,12 @@ import numpy as np
 __all__ = [
     "LINK_TASKS",
     "LINK_SECONDS",
+    "SHARE_PARTS",
     "ChainLinks",
     "snake_order",
     "cut_chains",
+    "ring_order",
+    "Arc",
     "pair_chains",
     "chain_links",
     "solve_in_chain",
@@ -36,6 +41,10 @@ __all__ = [
 LINK_TASKS = 32
 #: … and the work (s) it holds once the chain's pace is known (:class:`ChainLinks`)
 LINK_SECONDS = 0.5
+#: a link taken from an arc shared with another chain holds at most this fraction (1/SHARE_PARTS) of the tasks the
+#: chain still has to take for both to end together (in a model of the 200-task benchmark sweep with 2 links in
+#: flight per chain, the two chains end 0.9 ms apart with 25 links in all; taking up to half: 28 ms apart, 18 links)
+SHARE_PARTS = 3
 
 
 def snake_order(coordinates: list[np.ndarray], keys: list[Any] | None = None) -> list[int]:
@@ -91,7 +100,82 @@ def cut_chains(order: list[int], chains: int) -> list[list[int]]:
     return [order[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b > a]
 
 
-def pair_chains(order: list[int], workers: int) -> list[tuple[list[int], int | None]]:
+def ring_order(coordinates: list[np.ndarray], keys: list[Any] | None = None) -> tuple[list[int], bool]:
+    """The chain order, closed into a ring where the sweep's grid has one (else :func:`snake_order`'s path).
+
+    A grid whose first varied column (with more than one value) has ``m`` values, each with the same snake
+    of ``L`` combinations of the other columns, is an ``m × L`` grid of unit steps; it has a Hamiltonian cycle
+    when ``m`` or ``L`` is even (both at least 2): rows 1 … L−1 of each column in turn, back and forth, and home
+    along row 0. On a ring the chains that run towards each other from two cold heads meet wherever the work
+    balances (:class:`Arc`), instead of each ending at a fixed end of the path. One problem structure only
+    (a ring across structures would join tasks that cannot warm-start each other).
+
+    Parameters
+    ----------
+    coordinates : list of ndarray, shape (D,)
+        Each task's varied values as numbers.
+    keys : list, optional
+        Each task's structure key.
+
+    Returns
+    -------
+    order : list of int
+        A permutation of ``range(len(coordinates))``, consecutive tasks differing in one value by one step.
+    ring : bool
+        Whether the last task also neighbours the first.
+    """
+    path = snake_order(coordinates, keys)
+    n = len(coordinates)
+    if n < 4 or (keys is not None and len({repr(k) for k in keys}) > 1):
+        return path, False
+    matrix = np.stack([np.atleast_1d(np.asarray(c, float)) for c in coordinates])
+    matrix = matrix[:, [j for j in range(matrix.shape[1]) if len(np.unique(matrix[:, j])) > 1]]
+    if matrix.shape[1] < 2:
+        return path, False
+    levels = np.unique(matrix[:, 0])
+    rows = [_snake(matrix, [i for i in range(n) if matrix[i, 0] == level], 1, False) for level in levels]
+    m, length = len(rows), len(rows[0])
+    if length < 2 or any(not np.array_equal(matrix[r, 1:], matrix[rows[0], 1:]) for r in rows):
+        return path, False  # not a full product of the first column and one snake of the others
+    if m % 2 == 0:  # along each column's rows 1 … L−1, back and forth, then home along row 0
+        cycle = [(c, r) for c in range(m) for r in (range(1, length) if c % 2 == 0 else range(length - 1, 0, -1))]
+        cycle += [(c, 0) for c in range(m - 1, -1, -1)]
+    elif length % 2 == 0:  # the same with the roles of columns and rows exchanged
+        cycle = [(c, r) for r in range(length) for c in (range(1, m) if r % 2 == 0 else range(m - 1, 0, -1))]
+        cycle += [(0, r) for r in range(length - 1, -1, -1)]
+    else:
+        return path, False  # an odd number of tasks on a grid: no cycle of unit steps exists
+    return [rows[c][r] for c, r in cycle], True
+
+
+class Arc:
+    """Consecutive tasks of the chain order between two chains' starts, taken from both ends.
+
+    The chain running forwards from the head on the arc's left takes its first tasks, the chain running
+    backwards from the head on its right its last ones (:class:`ChainLinks`); where they meet depends on how
+    fast each runs, so that both end together.
+    """
+
+    def __init__(self, tasks: list[int]) -> None:
+        self.tasks, self.first, self.stop = list(tasks), 0, len(tasks)
+        self.ends: list[ChainLinks] = []  # the chains taking from it (one or two)
+
+    @property
+    def remaining(self) -> int:
+        """Tasks not taken yet."""
+        return self.stop - self.first
+
+    def pop(self, backwards: bool, size: int) -> list[int]:
+        """Take ``size`` tasks (fewer when fewer are left): the first ones, or with ``backwards`` the last ones."""
+        size = max(0, min(size, self.remaining))
+        if backwards:
+            self.stop -= size
+            return self.tasks[self.stop : self.stop + size][::-1]
+        self.first += size
+        return self.tasks[self.first - size : self.first]
+
+
+def pair_chains(order: list[int], workers: int, ring: bool = False) -> list[tuple[ChainLinks, int | None]]:
     """Chains for ``workers`` workers that share cold heads: two chains run outwards from each head.
 
     ``order`` is cut into one piece per worker (:func:`cut_chains`); the pieces are paired, and the pair
@@ -99,22 +183,43 @@ def pair_chains(order: list[int], workers: int) -> list[tuple[list[int], int | N
     chain ``Q``, whose first task neighbours the head in ``order`` and starts from the head's solution. A
     cold head costs 20–35 warm tasks on bench_sweep_overhead.py's sweep (0.37–0.6 s against 18 ms), so
     paying it once per pair instead of once per chain shortens the parallel run; ``Q``'s worker waits for it
-    (≈ one head), then both run. An odd worker out keeps a piece with its own cold head.
+    (≈ one head), then both run. An odd worker out keeps a piece with its own cold head, run forwards.
+
+    The tasks between two heads are one :class:`Arc`, taken from both ends by the chains that run towards
+    each other (``Q`` of one pair, ``P`` of the next; on a ``ring`` also the last chain and the first), so that
+    the pieces' lengths adapt to how fast each worker gets through its cold-head work and its tasks.
 
     Returns
     -------
-    list of (chain, seeded_by)
-        Each chain's task positions in solving order, and the index (in this list) of the chain whose head
-        its first task starts from, or None for a chain that starts cold.
+    list of (links, seeded_by)
+        Each chain's :class:`ChainLinks`, and the index (in this list) of the chain whose head its first task
+        starts from, or None for a chain that starts cold.
     """
     pieces = cut_chains(order, workers)
-    plan: list[tuple[list[int], int | None]] = []
+    # per chain: (its own first tasks, the tasks it takes from the arc before / after its start)
+    chains: list[tuple[list[int], int | None, bool]] = []  # (own, seeded_by, runs backwards)
+    spans: list[list[int]] = []  # the tasks each chain runs through after its own, in its direction of travel
     for k in range(0, len(pieces), 2):
         if k + 1 == len(pieces):
-            plan.append((pieces[k], None))
+            chains.append((pieces[k][:1], None, False))
+            spans.append(pieces[k][1:])
             break
-        plan.append((pieces[k][::-1], None))
-        plan.append((pieces[k + 1], len(plan) - 1))
+        chains.append((pieces[k][-1:], None, True))
+        spans.append(pieces[k][-2::-1])
+        chains.append(([], len(chains) - 1, False))
+        spans.append(pieces[k + 1])
+    # join each forward span with the backward span that follows it on the order (around the ring on a ring)
+    arcs: list[Arc | None] = [None] * len(chains)
+    for c, (_, _, backwards) in enumerate(chains):
+        if backwards:
+            continue
+        nxt = c + 1 if c + 1 < len(chains) else (0 if ring and len(chains) > 1 else None)
+        if nxt is not None and chains[nxt][2] and arcs[nxt] is None:
+            arcs[c] = arcs[nxt] = Arc(spans[c] + spans[nxt][::-1])
+    plan = []
+    for c, (own, seeded_by, backwards) in enumerate(chains):
+        arc = arcs[c] or Arc(spans[c][::-1] if backwards else spans[c])
+        plan.append((ChainLinks(own, arc=arc, backwards=backwards), seeded_by))
     return plan
 
 
@@ -126,6 +231,12 @@ class ChainLinks:
     link would take longer than ``seconds`` at the pace measured so far (:meth:`take`'s ``seconds_per_task``), so
     that a chain of slow tasks still reports progress and an interrupted sweep loses little.
 
+    After its own tasks ``chain`` the chain goes on through ``arc`` (from its start, or with ``backwards`` from
+    its end). When another chain takes from the other end of the same arc, a link holds at most a
+    :data:`SHARE_PARTS`-th of what this chain still has to take for both to end together — the arc's tasks
+    left and both chains' tasks in flight (:meth:`done`), shared in proportion to their paces — and nothing
+    while its tasks in flight already cover that share.
+
     Parameters
     ----------
     chain : list of int
@@ -134,23 +245,84 @@ class ChainLinks:
         The most tasks in one link.
     seconds : float
         The work one link should hold (s), once the pace of the chain's tasks is known.
+    arc : Arc, optional
+        Where the chain goes on after ``chain``.
+    backwards : bool
+        Take ``arc``'s tasks from its end.
     """
 
-    def __init__(self, chain: list[int], longest: int = LINK_TASKS, seconds: float = LINK_SECONDS) -> None:
-        self.chain, self.longest, self.seconds = chain, max(1, longest), seconds
+    def __init__(
+        self,
+        chain: list[int],
+        longest: int = LINK_TASKS,
+        seconds: float = LINK_SECONDS,
+        arc: Arc | None = None,
+        backwards: bool = False,
+    ) -> None:
+        self.chain, self.longest, self.seconds = list(chain), max(1, longest), seconds
+        self.arc, self.backwards = arc, backwards
+        if arc is not None:
+            arc.ends.append(self)
         self.start, self.size = 0, 1
+        self.taken: list[int] = []  # every task handed out, in order (:meth:`restart` solves them again)
+        self.in_flight = 0  # tasks handed out and not yet reported :meth:`done`
+        self.pace: float | None = None  # seconds per task, as last given to :meth:`take`
+
+    @property
+    def first(self) -> int | None:
+        """The chain's first task (its head, or the first of its arc), or None if it has none."""
+        if self.chain:
+            return self.chain[0]
+        if self.arc is None or not self.arc.tasks:
+            return None
+        return self.arc.tasks[-1] if self.backwards else self.arc.tasks[0]
 
     def take(self, seconds_per_task: float | None = None) -> list[int] | None:
-        """The next link (None when the chain is used up), given the measured seconds per task if known."""
-        if self.start >= len(self.chain):
-            return None
-        size = self.size
+        """The next link: None when the chain is used up, ``[]`` when it should wait for a link in flight.
+
+        ``seconds_per_task`` is the chain's measured pace, if known.
+        """
         if seconds_per_task is not None and seconds_per_task > 0:
-            size = max(1, min(size, int(self.seconds / seconds_per_task)))
-        link = self.chain[self.start : self.start + size]
-        self.start += size
-        self.size = min(2 * size, self.longest)
+            self.pace = seconds_per_task
+        size = self.size
+        if self.pace is not None:
+            size = max(1, min(size, int(self.seconds / self.pace)))
+        if self.start < len(self.chain):
+            link = self.chain[self.start : self.start + size]
+            self.start += len(link)
+        elif self.arc is not None and self.arc.remaining:
+            size = min(size, self._fair_share())
+            link = self.arc.pop(self.backwards, size)
+        else:
+            return None
+        self.size = min(2 * max(1, len(link)), self.longest)
+        self.taken += link
+        self.in_flight += len(link)
         return link
+
+    def _fair_share(self) -> int:
+        """The most tasks this link may take from a shared arc (0: wait for the tasks in flight)."""
+        others = [c for c in self.arc.ends if c is not self] if self.arc is not None else []
+        if not others or self.arc is None:
+            return self.longest
+        paces = [c.pace for c in (self, *others) if c.pace]
+        default = sum(paces) / len(paces) if paces else 1.0
+        rates = [1.0 / (c.pace or default) for c in (self, *others)]
+        work = self.arc.remaining + sum(c.in_flight for c in (self, *others))
+        share = work * rates[0] / sum(rates) - self.in_flight  # tasks still to take to end with the others
+        if share <= 0:
+            return 0 if self.in_flight else 1
+        return max(1, math.ceil(share / SHARE_PARTS))
+
+    def done(self, count: int) -> None:
+        """``count`` tasks handed out have finished (or will not be solved)."""
+        self.in_flight = max(0, self.in_flight - count)
+
+    def restart(self, solved: Collection[int] = ()) -> None:
+        """Hand out again every task taken so far but those ``solved`` (a chain solved again from another start)."""
+        again = [i for i in self.taken if i not in solved]
+        self.chain, self.taken = again + self.chain[self.start :], [i for i in self.taken if i in solved]
+        self.start, self.size, self.in_flight = 0, 1, 0
 
 
 def chain_links(chain: list[int], longest: int = LINK_TASKS) -> list[list[int]]:

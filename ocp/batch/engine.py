@@ -21,14 +21,17 @@ import numpy as np
 
 from ...core.errors import ConfigError
 from ...core.interrupts import deferred_interrupts
-from .chains import ChainLinks, best_seed, pair_chains, snake_order, solve_chain_link
+from .chains import ChainLinks, best_seed, pair_chains, ring_order, solve_chain_link
 from .cluster import CONNECT_TIMEOUT
 from .worker import shareable_starts, solve_start_share, solve_task, task_problem
 
 __all__ = ["open_client", "run_tasks", "CHAIN_AHEAD"]
 
-#: links of one chain submitted ahead of their results (a link is up to LINK_TASKS tasks, see ChainLinks)
-CHAIN_AHEAD = 4
+#: links of one chain submitted ahead of their results (a link is up to LINK_TASKS tasks, see ChainLinks): one
+#: solving and one waiting on its worker. Chains that share an arc cannot take back a link in flight, so more links
+#: ahead end them further apart (4 ahead: 50 ms apart in a run of the 40-task sweep; the 200-task sweep 1.52x serial
+#: with 4, 1.58x with 2 and the head's own chain speculating, medians of 5 rounds)
+CHAIN_AHEAD = 2
 #: dask settings of the local cluster: every task is pinned to its chain's worker, so there is nothing to steal
 #: or rebalance; the workers' statistical profiler (a thread sampling the solving thread every 10 ms) and the
 #: twice-a-second system monitors cost CPU that the two cores of a small machine share with the solves
@@ -147,9 +150,9 @@ def run_tasks(
     ``coordinates`` (grouped by ``structure_keys``), cut into one chain per worker, two chains running
     outwards from each cold head (:func:`mobisense.ocp.batch.chains.pair_chains`; the head's certain starts
     are solved on both chains' workers at once, :func:`mobisense.ocp.batch.worker.solve_start_share`), each
-    task started on its worker from its predecessor's converged point. The second chain of a pair does not wait
-    for the head's strategy to decide: it starts *speculatively* from the best start its own worker solved, and
-    its rows are held back until the head is decided — kept if the head's optimum agrees with that start's
+    task started on its worker from its predecessor's converged point. Neither chain of a pair waits for the
+    head's strategy to decide: each starts *speculatively* from the best start its own worker solved, and its
+    rows are held back until the head is decided — kept if the head's optimum agrees with that start's
     (``solver.agreement``, the strategy's own test of two optima being one), else discarded and the chain solved
     again from the head. Without ``warm_start`` every task starts cold, at most ``in_flight`` (default 2 ×
     workers) at a time. Ctrl-C and SIGTERM are held while dask is waited on and raised (``KeyboardInterrupt``)
@@ -206,14 +209,14 @@ class _TaskRun:
         self.workers = sorted(client.scheduler_info().get("workers", {})) or [None]
         if warm_start:  # each queue: one chain's links (lists of consecutive tasks), solved by one dask task each
             keys = structure_keys or [None] * n
-            plan = pair_chains(snake_order(coordinates or [np.zeros(1)] * n, keys), len(self.workers))
-            self.chains = [chain for chain, _ in plan]
+            order, ring = ring_order(coordinates or [np.zeros(1)] * n, keys)
+            plan = pair_chains(order, len(self.workers), ring)
+            self.queues = [links for links, _ in plan]
             self.seeded_by = [seed for _, seed in plan]
         else:
-            self.chains, self.seeded_by = [list(range(n))], [None]
-        # each queue hands out its next tasks: a chain's links (sized by the pace of its finished tasks), or one
-        # cold task at a time
-        self.queues = [ChainLinks(c) if warm_start else ChainLinks(c, longest=1) for c in self.chains]
+            self.queues, self.seeded_by = [ChainLinks(list(range(n)), longest=1)], [None]
+        # each queue hands out its next tasks: a chain's links (sized by the pace of its finished tasks, and
+        # shared with the chain running towards it), or one cold task at a time
         self.pace: dict[int, float] = {}  # queue -> worker-seconds per task of its latest finished link
         # a chain's next links wait on its worker (their payloads are small), so that the worker never waits for
         # the client (busy writing a batch of results); cold tasks are queued two per worker
@@ -225,8 +228,9 @@ class _TaskRun:
         self.generation = [0] * len(self.queues)  # a chain solved again (speculation lost) ignores older futures
         # chain -> the chain seeded by its head, on another worker (which helps solve the head's starts)
         self.partner = {s: q for q, s in enumerate(self.seeded_by) if s is not None and self.workers[0] is not None}
-        self.speculating: dict[int, Any] = {}  # partner chain -> the share future it started from, until decided
+        self.speculating: dict[int, Any] = {}  # chain -> the share future it went on from, until the head decides
         self.held: dict[int, list[tuple[list[int], list[dict[str, Any]]]]] = {}  # its finished links meanwhile
+        self.handed_on: set[int] = set()  # tasks whose rows went to on_result (a chain solved again skips them)
         for q in range(len(self.queues)):
             self.fill(q)
 
@@ -244,7 +248,7 @@ class _TaskRun:
     def submit_next(self, q: int) -> bool:
         """Submit queue ``q``'s next link (or cold task); False when it has none left."""
         tasks = self.queues[q].take(self.pace.get(q))
-        if tasks is None:
+        if not tasks:  # used up, or its links in flight already hold its share of an arc
             return False
         key = f"task-{tasks[0]}-{time.time_ns()}"
         if not self.warm_start:
@@ -256,17 +260,24 @@ class _TaskRun:
             shares, seeds = None, None
             if q not in self.heads and q in self.partner:  # a shared cold head: its certain starts on both workers
                 shares = [
-                    self.client.submit(solve_start_share, link[0], k, 2, pure=False, key=f"starts-{k}-{key}",
-                                       **self.pin(chain))  # fmt: skip
+                    self.client.submit(
+                        solve_start_share, link[0], k, 2, pure=False, key=f"starts-{k}-{key}", **self.pin(chain)
+                    )  # fmt: skip
                     for k, chain in enumerate((q, self.partner[q]))
                 ]
-                if shareable_starts(link[0]):  # the partner starts from its own share's best start
-                    self.speculating[self.partner[q]] = shares[1]
-            elif q not in self.heads and q in self.speculating:
+                if shareable_starts(link[0]):  # both chains go on from their own share's best start
+                    self.speculating[q], self.speculating[self.partner[q]] = shares
+            elif q not in self.last and q in self.speculating:
                 before, seeds = None, self.speculating[q]
-            future = self.client.submit(solve_chain_link, link, before, shares, seeds, q in self.speculating,
-                                        pure=False, key=key, **self.pin(q))  # fmt: skip
+            deciding = shares is not None  # the head itself is never speculative: it decides
+            future = self.client.submit(solve_chain_link, link, before, shares, seeds,
+                                        q in self.speculating and not deciding, pure=False, key=key,
+                                        **self.pin(q))  # fmt: skip
             self.heads.setdefault(q, future)
+            if deciding and q in self.speculating:  # the chain's next link does not wait for the head
+                self.futures[future] = (tasks, q, self.generation[q])
+                self.pending[q] += 1
+                return True
         self.futures[future] = (tasks, q, self.generation[q])
         self.last[q] = future
         self.pending[q] += 1
@@ -281,6 +292,7 @@ class _TaskRun:
         if generation != self.generation[q]:
             return  # a link of a speculation that was lost: solved again from the head
         self.pending[q] -= 1
+        self.queues[q].done(len(tasks))
         try:
             results = future.result() if self.warm_start else [future.result()]
         except Exception as exc:  # noqa: BLE001  (a task's failure is data, not a crash of the sweep)
@@ -288,26 +300,34 @@ class _TaskRun:
         seconds = [r["row"]["time_s"] for r in results if isinstance(r["row"].get("time_s"), float)]
         if seconds and future is not self.heads.get(q):  # a cold head is no measure of the warm tasks after it
             self.pace[q] = sum(seconds) / len(seconds)
-        if q in self.speculating:
+        head = q in self.partner and future is self.heads.get(q)  # a shared cold head, decided
+        if q in self.speculating and not head:
             self.held.setdefault(q, []).append((tasks, results))
+        elif not results:  # a speculative link with no start, finished after its head agreed with its share
+            self.solve_again(q)
+            return
         else:
             self.hand_on(tasks, results)
-        if q in self.partner and future is self.heads[q] and self.partner[q] in self.speculating:
-            self.decide(self.partner[q], results[0] if results else None)
+        if head:
+            for chain in (self.partner[q], q):
+                if chain in self.speculating:
+                    self.decide(chain, results[0] if results else None)
         if not (q in self.speculating and not results):  # a speculation without a start waits for the head
             self.fill(q)
 
     def hand_on(self, tasks: list[int], results: list[dict[str, Any]]) -> None:
         for i, result in zip(tasks, results, strict=True):  # a link's rows are all kept, then Ctrl-C
             result.pop("carry", None)
+            self.handed_on.add(i)
             self.on_result(i, result)
 
     def decide(self, q: int, head: dict[str, Any] | None) -> None:
-        """The head of partner chain ``q`` is decided: keep ``q``'s speculative rows, or solve ``q`` again."""
+        """The head chain ``q`` went on from is decided: keep ``q``'s speculative rows, or solve ``q`` again."""
         share = self.speculating.pop(q)
         seed = best_seed(share.result()) if share.done() and share.status == "finished" else None
         row = (head or {}).get("row", {})
-        head_task = self.chains[self.seeded_by[q]][0]
+        owner = q if self.seeded_by[q] is None else self.seeded_by[q]  # the chain whose first task is the head
+        head_task = self.queues[owner].first
         agreement = task_problem(self.payloads[head_task]).solver.agreement
         agrees = (
             seed is not None
@@ -319,16 +339,24 @@ class _TaskRun:
             for tasks, results in held:
                 self.hand_on(tasks, results)
             return
-        # lost: forget the chain's futures and solve it again from the head
-        stale = [f for f, (_, owner, _) in self.futures.items() if owner == q]
+        self.solve_again(q)
+
+    def solve_again(self, q: int) -> None:
+        """A speculation of chain ``q`` is lost: forget its futures and solve it again from its head."""
+        owner = q if self.seeded_by[q] is None else self.seeded_by[q]
+        stale = [f for f, (_, chain, _) in self.futures.items() if chain == q]
         self.client.cancel(stale)
         for f in stale:
             del self.futures[f]
         self.generation[q] += 1
         self.pending[q] = 0
-        self.queues[q] = ChainLinks(self.chains[q])
-        self.last.pop(q, None)
-        self.heads.pop(q, None)
+        if owner == q:  # the head's own chain: its head stays solved, the rest is solved again from it
+            self.queues[q].restart(self.handed_on)
+            self.last[q] = self.heads[q]
+        else:
+            self.queues[q].restart(self.handed_on)
+            self.last.pop(q, None)
+            self.heads.pop(q, None)
         self.fill(q)
 
 

@@ -159,6 +159,9 @@ def test_interrupted_sweep_resumes_without_recomputing(sweep_file, tmp_path, mon
         real_append(self, rows)
 
     monkeypatch.setattr(store.ResultStore, "append", count)
+    # the resumed run flushes by the bytes of the solutions held (each task's arrays, ≈ 30 kB, over 1 byte)
+    monkeypatch.setattr(command, "BATCH_ROWS", 1024)
+    monkeypatch.setattr(command, "BATCH_BYTES", 1)
     assert cli.main(["sweep", str(sweep_file), "--out", str(out), "--workers", "2", "--quiet"]) == 0
     assert calls == [1, 1, 1, 1, 1, 9]  # only the five unfinished tasks ran; then the fragments are compacted
     summary = json.loads((out / "summary.json").read_text())

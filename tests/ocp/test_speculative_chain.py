@@ -1,4 +1,4 @@
-"""The second chain of a pair starts from its own share of the head's starts, before the head is decided.
+"""Both chains of a pair start from their own share of the head's starts, before the head is decided.
 
 run_tasks is driven here through an in-process stand-in for dask's client whose futures finish in the order a
 test chooses, so that both outcomes of the speculation happen for certain: the head's optimum agrees with
@@ -80,18 +80,25 @@ def _payloads() -> list[dict[str, Any]]:
 
 
 def _run(
-    payloads: list[dict[str, Any]], monkeypatch: pytest.MonkeyPatch, partner_links_first: int, together: bool = False
+    payloads: list[dict[str, Any]],
+    monkeypatch: pytest.MonkeyPatch,
+    partner_links_first: int,
+    together: bool = False,
+    own_links_first: int = 0,
 ) -> tuple[_Client, list[tuple[int, dict]]]:
     """run_tasks on 2 stand-in workers; ``partner_links_first`` links of the partner chain finish before the head.
 
-    With 6 tasks on a line, the head chain is tasks 2, 1, 0 (its head is task 2) and the partner chain 3, 4, 5.
+    With 6 tasks on a line, the head chain is tasks 2, 1, 0 (its head is task 2) and the partner chain 3, 4, 5;
+    ``own_links_first`` links of the head's own chain after the head finish before it too.
     ``together``: the head and the partner's next link are reported finished by the same wait, the head first.
     """
-    client, rows, finished_partner = _Client(), [], []
+    client, rows, finished_partner, finished_own = _Client(), [], [], []
 
     def rank(future: _Future) -> tuple[int, str]:
         task = int(future.key.split("-")[1])
         if task >= 3 and len(finished_partner) < partner_links_first:
+            return 0, future.key
+        if task < 2 and len(finished_own) < own_links_first:
             return 0, future.key
         return (1 if task == 2 else 2 if task < 3 else 3), future.key
 
@@ -100,6 +107,8 @@ def _run(
         first.compute()
         if int(first.key.split("-")[1]) >= 3:
             finished_partner.append(first.key)
+        elif int(first.key.split("-")[1]) < 2:
+            finished_own.append(first.key)
         partner = [f for f in futures if int(f.key.split("-")[1]) >= 3]
         if together and first.key.startswith("task-2-") and partner:
             partner[0].compute()
@@ -170,3 +179,33 @@ def test_a_speculation_without_a_start_waits_for_the_head(monkeypatch):
     assert all(row["status"] == "solved" for _, row in rows)
     partner = [row for i, row in rows if i >= 3]
     assert all(row["start"] == "warm start from init" for row in partner)  # from the head, not cold
+
+
+@pytest.mark.slow
+def test_the_head_chain_goes_on_before_its_head_is_decided_and_keeps_its_rows(monkeypatch):
+    # the head's own chain (tasks 1, 0 after the head 2) starts from its own share's best start too: both its
+    # links finish before the head (the other share is slower), their rows are held, then kept
+    payloads = _payloads()
+    client, rows = _run(payloads, monkeypatch, partner_links_first=2, own_links_first=2)
+    assert sorted(i for i, _ in rows) == list(range(6))
+    firsts = [k.split("-")[1] for k in client.ran if k.startswith("task-")]  # each link by its first task
+    assert client.cancelled == [] and len(firsts) == len(set(firsts)) == 4  # [2], [1, 0], [3], [4, 5]: once each
+    assert rows[0][0] == 2  # the head's row first: every other row waited for its decision
+    for i, row in rows:
+        assert row["status"] == "solved" and (row["start"] == "warm start from init") == (i != 2)
+        assert row["cost"] == pytest.approx(solve_direct(payloads[i]["problem"]).cost, rel=1e-8)
+
+
+@pytest.mark.slow
+def test_a_head_chain_that_disagrees_with_its_head_is_solved_again_after_it(monkeypatch):
+    payloads = _payloads()
+    real = engine.best_seed
+    monkeypatch.setattr(engine, "best_seed", lambda records: None if (seed := real(records)) is None
+                        else {**seed, "cost": 2 * seed["cost"]})  # fmt: skip
+    client, rows = _run(payloads, monkeypatch, partner_links_first=1, own_links_first=1)
+    assert sorted(i for i, _ in rows) == list(range(6))  # every task once; the head is not solved again
+    assert sum(k.startswith("task-2-") for k in client.ran) == 1
+    assert sum(k.startswith("task-1-") for k in client.ran) == 2  # speculatively, then again from the head
+    for i, row in rows:
+        assert row["status"] == "solved"
+        assert row["cost"] == pytest.approx(solve_direct(payloads[i]["problem"]).cost, rel=1e-8)
