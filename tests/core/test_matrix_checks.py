@@ -45,6 +45,21 @@ def test_symmetry_check_is_np_allclose_spelt_out():
     verdicts = [(_allclose_symmetric(a), _passes_symmetry(a)) for a in cases]
     assert all(ref == ours for ref, ours in verdicts)
     assert {ref for ref, _ in verdicts} == {True, False}  # both outcomes occur
+    # the same verdicts again, now from the cache of spectrum facts (keyed by the matrix's bytes)
+    assert [(_allclose_symmetric(a), _passes_symmetry(a)) for a in cases] == verdicts
+
+
+def test_a_matrix_changed_after_its_check_is_checked_again():
+    m = np.array([[2.0, 1.0], [1.0, 2.0]])
+    check_psd("M", m)  # cached: positive definite
+    m[1, 1] = -5.0  # the same array object, other entries
+    with pytest.raises(ValueError, match="smallest eigenvalue -5.1"):
+        check_psd("M", m)
+    big = np.eye(70)  # beyond CACHED_MATRIX_ENTRIES: checked directly, the same verdicts
+    check_psd("M", big)
+    big[0, 0] = -1.0
+    with pytest.raises(ValueError, match="smallest eigenvalue -1"):
+        check_psd("M", big)
 
 
 def test_set_path_copies_deeply_and_leaves_the_original():
