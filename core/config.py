@@ -32,6 +32,7 @@ __all__ = [
     "InvalidValue",
     "StrictModel",
     "FiniteFloat",
+    "number_error",
     "PositiveFloat",
     "NonNegativeFloat",
     "Vector2",
@@ -70,14 +71,26 @@ class StrictModel(BaseModel):
     model_config = ConfigDict(extra="forbid", validate_assignment=True, frozen=False, strict=True)
 
 
-def _finite(value: float) -> float:
+def number_error(value: float) -> str | None:
+    """Why ``value`` cannot be a number of a file (not finite, or a magnitude outside the bounds), or None if it can.
+
+    The rule of every number read from a file: finite, and 0 or of a magnitude in
+    [:data:`MIN_MAGNITUDE`, :data:`MAX_MAGNITUDE`].
+    """
     if not math.isfinite(value):
-        raise ValueError(f"expected a finite number, got {brief(value)}")
+        return f"expected a finite number, got {brief(value)}"
     if value != 0 and not MIN_MAGNITUDE <= abs(value) <= MAX_MAGNITUDE:
-        raise ValueError(
+        return (
             f"expected a magnitude in [{MIN_MAGNITUDE:g}, {MAX_MAGNITUDE:g}] (or 0 where allowed), got {value:g} "
             "(products of such numbers overflow or underflow; change the units)"
         )
+    return None
+
+
+def _finite(value: float) -> float:
+    error = number_error(value)
+    if error is not None:
+        raise ValueError(error)
     return float(value)
 
 

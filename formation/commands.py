@@ -155,7 +155,9 @@ def check_scenario(data: dict, path: Path, kind: str) -> str:
         from .replay.plan import resolve
         from .replay.reference import reference_status
 
-        status = reference_status(resolve(path, config.solution), resolve(path, config.problem), config.task)
+        status = reference_status(
+            resolve(path, config.solution), resolve(path, config.problem), config.task, config.tracking, str(path)
+        )
         runs = config.monte_carlo.runs
         return f"plan replay {config.name!r}: {status}; Monte Carlo with {runs} runs"
     if kind == "field_replay":

@@ -21,7 +21,6 @@ from __future__ import annotations
 import difflib
 import importlib
 import inspect
-import math
 import re
 from collections.abc import Sequence
 from pathlib import Path
@@ -30,7 +29,7 @@ from typing import Any
 import numpy as np
 from pydantic import ConfigDict, PrivateAttr, ValidationInfo, model_validator
 
-from ...core.config import InvalidValue, StrictModel
+from ...core.config import MAX_MAGNITUDE, InvalidValue, StrictModel, number_error
 from ...core.errors import brief
 from .base import FIELDS, Field, make_field, register_field
 
@@ -261,21 +260,45 @@ def load_fields() -> dict[str, type[Field]]:
     return FIELDS
 
 
-def _non_finite(value: Any, path: str) -> str | None:
-    """The key path of the first NaN or infinite number in a nested parameter value, or None."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return path
+def _bad_number(value: Any, path: str, numeric: bool) -> tuple[str, str] | None:
+    """The key path and the error of the first number in a nested parameter value that a file may not hold.
+
+    Every number follows the rule of every file (:func:`mobisense.core.config.number_error`: finite, a magnitude
+    in [1e-100, 1e100] or 0); with ``numeric`` (a parameter annotated as numbers) every leaf must be a number,
+    not a boolean or a string. None if the value is acceptable.
+    """
     if isinstance(value, (list, tuple)):
         for i, item in enumerate(value):
-            where = _non_finite(item, f"{path}[{i}]")
-            if where is not None:
-                return where
+            found = _bad_number(item, f"{path}[{i}]", numeric)
+            if found is not None:
+                return found
+        return None
     if isinstance(value, dict):
         for key, item in value.items():
-            where = _non_finite(item, f"{path}.{key}")
-            if where is not None:
-                return where
+            found = _bad_number(item, f"{path}.{key}", False)
+            if found is not None:
+                return found
+        return None
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        try:
+            error = number_error(float(value))
+        except OverflowError:  # an integer beyond any double
+            digits = len(str(abs(value)))
+            error = f"expected a magnitude of at most {MAX_MAGNITUDE:g}, got an integer of {digits} digits"
+        return None if error is None else (path, error)
+    if numeric:
+        return path, f"expected a number, got {brief(value)}"
     return None
+
+
+#: a constructor annotation that holds only numbers: float, int, Sequence[float], Sequence[Sequence[float]], …
+_NUMERIC = re.compile(r"^(Sequence\[)*(float|int)\]*$")
+
+
+def _numeric(annotation: Any) -> bool:
+    """Whether a field constructor's parameter annotation (a string, or a type) asks for numbers only."""
+    text = annotation if isinstance(annotation, str) else getattr(annotation, "__name__", "")
+    return bool(_NUMERIC.match(text.replace(" ", "").replace("typing.", "").replace("collections.abc.", "")))
 
 
 def _scenario_folder(info: ValidationInfo) -> Path | None:
@@ -315,7 +338,8 @@ class FieldSpec(StrictModel):
                 f"unknown field kind {self.kind!r}{f'; did you mean {hint[0]!r}?' if hint else ''} "
                 f"(expected one of {', '.join(sorted(kinds))})",
             )
-        allowed = [p for p in inspect.signature(kinds[self.kind].__init__).parameters if p != "self"]
+        signature = inspect.signature(kinds[self.kind].__init__).parameters
+        allowed = [p for p in signature if p != "self"]
         for key in self.parameters():
             if key not in allowed:
                 hint = difflib.get_close_matches(key, allowed, n=1)
@@ -325,10 +349,10 @@ class FieldSpec(StrictModel):
                     f"(allowed: {', '.join(allowed)})",
                 )
         parameters = self.parameters()
-        for key, value in parameters.items():  # NaN or ±inf in a field's numbers: refused, as everywhere else
-            where = _non_finite(value, key)
-            if where is not None:
-                raise InvalidValue(where, f"expected finite numbers, got {brief(value)}")
+        for key, value in parameters.items():  # NaN, ±inf, 1e200 in a field's numbers: refused, as everywhere else
+            found = _bad_number(value, key, False)
+            if found is not None:
+                raise InvalidValue(*found)
         folder = _scenario_folder(info)
         for key in getattr(kinds[self.kind], "file_parameters", ()):
             value = parameters.get(key)
@@ -342,6 +366,10 @@ class FieldSpec(StrictModel):
             if rest and re.split(r"[.\[]", key, maxsplit=1)[0] in allowed:  # "degree: expected …" → field.degree
                 raise InvalidValue(key, rest) from None
             raise InvalidValue(self.kind, message) from None
+        for key, value in parameters.items():  # a boolean or string the constructor turned into a number silently
+            found = _bad_number(value, key, _numeric(signature[key].annotation))
+            if found is not None:
+                raise InvalidValue(*found)
         return self
 
     def parameters(self) -> dict[str, Any]:

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -76,9 +76,18 @@ def _check(
     return solution, problem, f"loaded {solution_path} (problem hash {current} matches {problem_path})"
 
 
-def reference_status(solution_path: Path, problem_path: Path | None, task: int | None = None) -> str:
-    """What :func:`load_checked` would do, without solving (for ``mobisense validate``)."""
-    solution, _, note = _check(solution_path, problem_path, task)
+def reference_status(
+    solution_path: Path, problem_path: Path | None, task: int | None = None, tracking: Any = None, source: str = ""
+) -> str:
+    """What :func:`load_checked` would do, without solving (for ``mobisense validate``).
+
+    With ``tracking`` (:class:`~mobisense.formation.replay.plan.TrackingGains`) its gains are also checked
+    against the plan's horizon (``ConfigError`` naming ``source``), as the replay will.
+    """
+    solution, problem, note = _check(solution_path, problem_path, task)
+    planned = solution.problem if solution is not None else problem
+    if tracking is not None and planned is not None:
+        tracking.check_horizon(planned.horizon.tf - planned.horizon.t0, source)
     return note if solution is not None else f"{note}: the replay solves {problem_path} first"
 
 

@@ -340,7 +340,7 @@ def simulate(system: ReplaySystem, seed: int | None = None, progress: bool = Fal
         _record(rec, system, loop, times[k], y)
         if k == steps:
             break
-        sol = solve_ivp(loop.rhs, (times[k], times[k + 1]), y, rtol=1e-7, atol=atol)
+        sol = solve_ivp(_bounded(loop.rhs, times[k]), (times[k], times[k + 1]), y, rtol=1e-7, atol=atol)
         if not sol.success:
             raise ReplayError(f"integration failed at t = {times[k]:.6g}: {sol.message}")
         y = sol.y[:, -1]
@@ -354,6 +354,29 @@ def simulate(system: ReplaySystem, seed: int | None = None, progress: bool = Fal
         rec.reference = system.center.position(times)
     rec.meta = {"wall_time_s": time.perf_counter() - started, "steps": steps, **system.info}
     return rec
+
+
+#: the most evaluations of the closed loop's right-hand side within one filter period: the shipped replays take at
+#: most 20–38 (RK45, rtol 1e-7, measured); gains of 1e12 (a fuzzer's) made the loop so stiff that a period took
+#: minutes — now stopped after ≈ 3 s
+MAX_EVALUATIONS_PER_PERIOD = 20_000
+
+
+def _bounded(rhs: Any, start: float) -> Any:
+    """``rhs`` raising :class:`ReplayError` once called more than :data:`MAX_EVALUATIONS_PER_PERIOD` times."""
+    calls = [0]
+
+    def counted(t: float, y: np.ndarray) -> np.ndarray:
+        calls[0] += 1
+        if calls[0] > MAX_EVALUATIONS_PER_PERIOD:
+            raise ReplayError(
+                f"the closed loop is too stiff to integrate: more than {MAX_EVALUATIONS_PER_PERIOD} evaluations "
+                f"within the filter period from t = {start:.6g} (reached t = {t:.6g}); lower the gains of the "
+                "formation or the motion, or the time step"
+            )
+        return rhs(t, y)
+
+    return counted
 
 
 def _progress(enabled: bool, total: int, name: str) -> tuple[Any, Any] | None:

@@ -35,9 +35,10 @@ from ...core.keypath import get_path, parse_key_path, with_values
 from ...core.kinds import load_as
 from ..model import Structure
 from ..problem import Problem, load_problem, problem_digest
-from ..sizes import direct_estimate, solution_bytes
+from ..sizes import problem_estimates, solution_bytes
 
 __all__ = [
+    "RESULT_COLUMNS",
     "MAX_TASKS",
     "SweepSpec",
     "SweepTask",
@@ -49,6 +50,23 @@ __all__ = [
     "sweep_digest",
     "value_coordinates",
 ]
+
+#: columns of results.parquet after the task id, index and one column per varied key path
+RESULT_COLUMNS = [
+    "status",
+    "cost",
+    "terminal_cost",
+    "running_cost",
+    "iterations",
+    "time_s",
+    "solve_time_s",
+    "worker",
+    "error",
+    "start",
+    "transcription_cached",
+    "solution_file",
+]
+
 
 #: most tasks of one sweep (expanding and validating one takes ~4 ms: 10⁵ tasks ≈ 7 minutes)
 MAX_TASKS = 100_000
@@ -74,6 +92,11 @@ class SweepSpec(StrictModel):
                 raise ValueError(f"{key}: expected at least one value")
             if key.strip() == "name":  # expand_sweep names each task after the base problem and its index
                 raise ValueError(f"{key}: the tasks are named by the sweep (base name and index); vary another key")
+            if key.strip() in ("task", "index", *RESULT_COLUMNS):  # a row holds both under one column name
+                raise ValueError(
+                    f"{key}: also the name of a column of the results; vary the keys inside it ({key}.…) instead "
+                    "(mode: zip to change several together)"
+                )
         return vary
 
 
@@ -136,25 +159,56 @@ def task_count(spec: SweepSpec, source: str = "<sweep>") -> int:
     return count
 
 
-def sweep_estimates(spec: SweepSpec, base: Problem, local_workers: int, source: str = "<sweep>") -> list[Estimate]:
-    """Memory of a sweep, before expanding it: its tasks and results in this process, the local workers."""
-    tasks = task_count(spec, source)
-    per_task = 8 * len(json.dumps(base.normalised())) + 8 * len(json.dumps(spec.vary)) / max(1, tasks) + 2048
-    worker = direct_estimate(base)
+def sweep_estimates(
+    spec: SweepSpec,
+    base: Problem,
+    local_workers: int,
+    source: str = "<sweep>",
+    tasks: list[SweepTask] | None = None,
+) -> list[Estimate]:
+    """Memory and time of a sweep: its tasks and results in this process, the local workers' solves.
+
+    Before the tasks are expanded (``tasks`` None) the workers' part is the base problem's; with the expanded
+    ``tasks`` it is that of the largest of their problem structures (a varied value can change the grid, the
+    sensors or the method: ``solver.collocation.intervals: [100000]`` needs 51 GiB where the base needs 10 MB),
+    and the time the sum over the tasks.
+    """
+    count = task_count(spec, source)
+    per_task = 8 * len(json.dumps(base.normalised())) + 8 * len(json.dumps(spec.vary)) / max(1, count) + 2048
+    if tasks:
+        by_structure: dict[Any, list[SweepTask]] = {}
+        for task in tasks:
+            by_structure.setdefault(task.structure, []).append(task)
+        problems = {k: group[0].model or Problem.from_dict(group[0].problem) for k, group in by_structure.items()}
+        solves = {k: _solve_estimate(problem) for k, problem in problems.items()}
+        key = max(solves, key=lambda k: solves[k].bytes)
+        worker, result_bytes = solves[key], solution_bytes(problems[key])
+        seconds = sum(solves[k].seconds * len(group) for k, group in by_structure.items())
+    else:
+        worker = _solve_estimate(base)
+        seconds = worker.seconds * count
+        result_bytes = solution_bytes(base)
     return [
-        Estimate(f"the sweep's {tasks} tasks", tasks * per_task, "use fewer values or split the sweep"),
+        Estimate(f"the sweep's {count} tasks", count * per_task, "use fewer values or split the sweep"),
         Estimate(
             f"{local_workers} local worker processes, each solving {worker.what}",
-            local_workers * (PROCESS_BYTES + worker.bytes + solution_bytes(base)),
+            local_workers * (PROCESS_BYTES + worker.bytes + result_bytes),
             worker.hint + "; or fewer --workers",
         ),
         Estimate(  # warm-started tasks take a fraction of a cold solve: counted as a fifth
-            f"the sweep's {tasks} solves on {local_workers or 'the cluster'}'s workers",
+            f"the sweep's {count} solves on {local_workers or 'the cluster'}'s workers",
             0.0,
             "use fewer values, split the sweep, or run it on a cluster (--scheduler)",
-            worker.seconds * tasks / 5 / local_workers if local_workers else 0.0,
+            seconds / 5 / local_workers if local_workers else 0.0,
         ),
     ]
+
+
+def _solve_estimate(problem: Problem) -> Estimate:
+    """One solve of ``problem`` by its method: the largest part's memory, every part's time (``both``: two)."""
+    parts = problem_estimates(problem)
+    largest = max(parts, key=lambda e: e.bytes)
+    return Estimate(largest.what, largest.bytes, largest.hint, sum(e.seconds for e in parts))
 
 
 def expand_sweep(spec: SweepSpec, base: Problem, source: str = "<sweep>") -> list[SweepTask]:

@@ -16,27 +16,12 @@ from typing import Any
 from ...core.files import write_json
 from ...core.interrupts import deferred_interrupts
 from ..task_files import remove_unlisted, write_task_files
-from .sweep import expand_sweep, load_sweep
+from .sweep import RESULT_COLUMNS, expand_sweep, load_sweep
 from .sweep_report import SweepProgress, sweep_summary
 
 __all__ = ["SweepResult", "run_sweep", "RESULT_COLUMNS", "content_bytes"]
 
 
-#: columns of results.parquet after the task id, index and one column per varied key path
-RESULT_COLUMNS = [
-    "status",
-    "cost",
-    "terminal_cost",
-    "running_cost",
-    "iterations",
-    "time_s",
-    "solve_time_s",
-    "worker",
-    "error",
-    "start",
-    "transcription_cached",
-    "solution_file",
-]
 #: task statuses that are final (not re-run on resume)
 DONE = ("solved", "failed")
 #: finished rows are appended to results.parquet in batches of at most this many rows, …
@@ -139,6 +124,7 @@ def run_sweep(
     local = 0 if scheduler else min(count, workers or os.cpu_count() or 1)
     check_budget(sweep_estimates(spec, base, local, source), max_memory, source, max_time)
     tasks = expand_sweep(spec, base, source=source)  # ConfigError -> nothing run or written
+    check_budget(sweep_estimates(spec, base, local, source, tasks), max_memory, source, max_time)  # their largest
     folder = OutputFolder.check(out)
     digest = sweep_digest(tasks)
     with folder.lock():

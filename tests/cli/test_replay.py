@@ -176,8 +176,15 @@ BAD = [
     # found by a mutation fuzzer: non-finite field numbers ran (exit 1, numpy warnings); a start faster than
     # max_speed crawled through the saturation for minutes; a list or mapping as a kind was an internal error
     ("replay_two_charges", _set(["field", "charges"], [[float("nan"), 0.0], [3.0, 0.0]]),
-     "field.charges[0][0]: expected finite numbers"),
-    ("replay_two_charges", _set(["field", "strength"], float("inf")), "field.strength: expected finite numbers"),
+     "field.charges[0][0]: expected a finite number, got nan"),
+    ("replay_two_charges", _set(["field", "strength"], float("inf")), "field.strength: expected a finite number"),
+    # … and numbers of a magnitude no file may hold (softening² overflowed: internal error), booleans and strings
+    # where the field's constructor takes numbers (np.asarray turned True into 1.0 and "3" into 3.0: accepted)
+    ("replay_two_charges", _set(["field", "softening"], 1e200), "field.softening: expected a magnitude in [1e-100"),
+    ("replay_two_charges", _set(["field", "charges"], [[True, 0.0], [3.0, 0.0]]),
+     "field.charges[0][0]: expected a number, got True"),
+    ("replay_two_charges", _set(["field", "charges"], [["-3", 0.0], [3.0, 0.0]]),
+     "field.charges[0][0]: expected a number, got '-3'"),
     ("replay_isotherm13", _set(["platforms", "initial", "velocity"], [1e12, 0.0]),
      "platforms.initial.velocity: expected a speed at most max_speed"),
     ("replay_two_charges", _set(["formation", "kind"], ["rotating"]), "formation.kind: unknown formation ['rotating']"),
@@ -208,3 +215,16 @@ def test_animate_is_refused_for_a_replay_that_is_not_a_field_replay(tmp_path, ca
     assert main(["replay", "replay_hussein2008", "--animate", "--out", str(out)]) == 2
     assert "--animate: only a field replay is animated, this is a plan_replay file" in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("key", [["motion", "steering_gain"], ["formation", "gains", "shape_stiffness"]])
+def test_a_loop_too_stiff_to_integrate_stops_with_exit_1(tmp_path, capsys, key):
+    # gains of 1e12 (a fuzzer's) made one filter period take minutes: the integration of a period is bounded
+    # (MAX_EVALUATIONS_PER_PERIOD, 500 times the most any shipped replay needs: ≈ 3 s) and the replay stops saying so
+    from mobisense.formation.replay.simulation import MAX_EVALUATIONS_PER_PERIOD
+
+    path = write(tmp_path, _set(key, 1e12)(shipped("replay_two_charges")))
+    assert main(["replay", str(path), "--out", str(tmp_path / "out"), "--no-plot", "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert f"the closed loop is too stiff to integrate: more than {MAX_EVALUATIONS_PER_PERIOD} evaluations" in err

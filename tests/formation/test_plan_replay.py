@@ -179,6 +179,17 @@ def test_cli_replays_a_solution_and_rejects_a_bad_offset(saved_solution, tmp_pat
     assert main(["replay", str(bad), "--out", str(tmp_path / "bad_out")]) == 2
     assert "initial_offset: expected 1 offsets" in capsys.readouterr().err
     assert not (tmp_path / "bad_out").exists()
+    # gains whose loop no integration resolves over the plan (a fuzzer's damping 1e12 ran for minutes): refused by
+    # validate and replay, nothing written; 1e4 over the 10-T plan is 1e5 time constants, the most accepted
+    for damping, code in ((1e12, 2), (1.0001e4, 2)):
+        bad.write_text(yaml.safe_dump({"name": "r", "solution": str(saved_solution), "tracking": {"damping": damping}}))
+        for argv in (["validate", str(bad)], ["replay", str(bad), "--out", str(tmp_path / "bad_out")]):
+            assert main(argv) == code
+            err = capsys.readouterr().err
+            assert err.count("\n") == 1 and f"{bad}: tracking.damping: the closed loop's fastest rate" in err
+        assert not (tmp_path / "bad_out").exists()
+    bad.write_text(yaml.safe_dump({"name": "r", "solution": str(saved_solution), "tracking": {"damping": 1e4}}))
+    assert main(["validate", str(bad)]) == 0
 
 
 @pytest.mark.slow

@@ -54,7 +54,7 @@ def test_key_paths():
         parse_key_path("cost..alpha")
 
 
-def test_sweep_files_refuse_a_varied_name_and_a_base_that_is_a_folder(tmp_path, capsys):
+def test_sweep_files_refuse_a_varied_name_or_result_column_and_a_base_that_is_a_folder(tmp_path, capsys):
     (tmp_path / "base.yaml").write_text(yaml.safe_dump(small_base()))
     (tmp_path / "folder").mkdir()
     cases = {
@@ -62,6 +62,10 @@ def test_sweep_files_refuse_a_varied_name_and_a_base_that_is_a_folder(tmp_path, 
                       "vary: name: the tasks are named by the sweep (base name and index); vary another key"),
         "folder.yaml": ({"base": "folder", "vary": {"cost.alpha": [0.1]}},
                         f"base: {tmp_path / 'folder'} is a directory, expected the base problem file"),
+        # the whole cost section: its column and the optimal cost's would be one (a fuzzer's: internal error
+        # ArrowInvalid after the first results were written)
+        "cost.yaml": ({"base": "base.yaml", "vary": {"cost": [{"M": [[1.0]], "alpha": 0.1}]}},
+                      "vary: cost: also the name of a column of the results; vary the keys inside it (cost.…)"),
     }  # fmt: skip
     for name, (spec, expected) in cases.items():
         (tmp_path / name).write_text(yaml.safe_dump(spec))
