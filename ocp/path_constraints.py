@@ -349,8 +349,7 @@ def margins(constraints: PathConstraints, p: np.ndarray, v: np.ndarray) -> dict[
             depth = -np.max([(p - a) @ n for a, n in edges], axis=0)
         out[f"keep_out[{k}]"] = depth.max(axis=1)
     if constraints.min_separation is not None and N > 1:
-        gaps = [np.linalg.norm(p[:, i] - p[:, j], axis=1) for i in range(N) for j in range(i + 1, N)]
-        out["min_separation"] = constraints.min_separation - np.min(gaps, axis=0)
+        out["min_separation"] = constraints.min_separation - _closest_pairs(p)
     if constraints.max_speed is not None:
         out["max_speed"] = np.linalg.norm(v, axis=2).max(axis=1) - constraints.max_speed
     if constraints.workspace is not None:
@@ -358,6 +357,19 @@ def margins(constraints: PathConstraints, p: np.ndarray, v: np.ndarray) -> dict[
         outside = np.maximum.reduce([w.x[0] - p[..., 0], p[..., 0] - w.x[1], w.y[0] - p[..., 1], p[..., 1] - w.y[1]])
         out["workspace"] = outside.max(axis=1)
     return out
+
+
+def _closest_pairs(p: np.ndarray) -> np.ndarray:
+    """The smallest distance between two of the N points at each time, shape (T,), for ``p`` of shape (T, N, 2).
+
+    Vectorised over the N(N−1)/2 pairs in chunks of times holding at most 2²⁰ pair distances (a loop over the
+    pairs took 11 s for 2000 sensors).
+    """
+    i, j = np.triu_indices(p.shape[1], 1)
+    chunk = max(1, 2**20 // len(i))
+    return np.concatenate(
+        [np.linalg.norm(p[t : t + chunk, i] - p[t : t + chunk, j], axis=2).min(axis=1) for t in range(0, len(p), chunk)]
+    )
 
 
 def check_initial_state(constraints: PathConstraints, p0: list[list[float]], v0: list[list[float]]) -> None:

@@ -50,8 +50,12 @@ from .path_constraints import PathConstraints, check_initial_state, check_termin
 from .solver_options import BVPOptions, CollocationOptions, HomotopyOptions, SolverOptions
 
 MAX_DIRECT_FIELD_STATES = 9  #: a larger field is refused by the methods that carry Σ as variables
+#: most sensors of a problem (a thousand already exceed the memory budget of every method here; a fuzzer's 2000
+#: took 11 s to refuse, in the initial state's pairwise separation check)
+MAX_SENSORS = 1000
 
 __all__ = [
+    "MAX_SENSORS",
     "Units",
     "Horizon",
     "Process",
@@ -220,7 +224,9 @@ class Problem(StrictModel):
     units: Units = Field(Units(), description="units of the file's numbers (default metre, second)")
     horizon: Horizon = Field(description="time horizon [t0, tf]")
     process: Process = Field(description="the estimated process and its initial error covariance")
-    sensors: list[Sensor] = Field(min_length=1, description="the mobile sensors (at least one)")
+    sensors: list[Sensor] = Field(
+        min_length=1, max_length=MAX_SENSORS, description=f"the mobile sensors (1 to {MAX_SENSORS})"
+    )
     cost: Cost = Field(description="weights of J = Tr[M Σ(tf)] + ∫ (α/2 |u|² + Tr[K Σ]) dt")
     constraints: PathConstraints | None = Field(
         None, description="path constraints of the sensors (direct method; docs/theory/path_constraints.md)"

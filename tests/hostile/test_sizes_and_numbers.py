@@ -79,6 +79,7 @@ CASES: dict[str, Case] = {
     "solve K=100000 d=9": Case("solve", _none, 2, ("too large", "--intervals"),
                                ("--intervals", "100000", "--degree", "9")),
     "solve 1000 sensors": Case("solve", _sensors(1000), 2, ("too large", "N = 1000 sensors")),
+    "solve 2000 sensors": Case("solve", _sensors(2000), 2, ("sensors", "at most 1000 items")),
     "solve 150 states": Case("solve", _states(150), 2, ("too large", "n = 150 states")),
     "solve --step 1e-13": Case("solve", _none, 2, ("solver.homotopy.step",), ("--step", "1e-13")),
     "solve adaptive --step 1e-13": Case("solve", _none, 2, ("solver.homotopy.step",),

@@ -36,6 +36,18 @@ def test_margins_are_the_exact_distances() -> None:
     np.testing.assert_allclose(m["workspace"], [-9.0, -5.5, 2.0])
 
 
+def test_the_separation_margin_is_the_closest_pair_at_each_time() -> None:
+    # independent: scipy's pdist over every pair at each time; sizes that need one chunk of times and several
+    from scipy.spatial.distance import pdist
+
+    rng = np.random.default_rng(3)
+    c = PathConstraints(min_separation=0.25)
+    for T, N in ((7, 2), (5, 9), (40, 300)):  # 40 × 44 850 pair distances: two chunks of 2^20
+        p = rng.uniform(-10, 10, (T, N, 2))
+        expected = [0.25 - pdist(p[t]).min() for t in range(T)]
+        np.testing.assert_allclose(margins(c, p, np.zeros_like(p))["min_separation"], expected, rtol=1e-14)
+
+
 def test_resimulation_is_exact_for_a_constant_control() -> None:
     problem = Problem.from_dict(base())
     K, d = 7, 3
