@@ -119,6 +119,18 @@ class ComparedSolution(Solution):
         return content
 
 
+def _direct_only(direct: Solution, exc: BaseException) -> ComparedSolution:
+    """The ``both`` result when the indirect method failed before its first BVP: the direct solution, failed."""
+    reason = " ".join(str(exc).split())[:300] or type(exc).__name__
+    stats: dict[str, Any] = dict(direct.stats)
+    stats["direct_time_s"] = direct.stats.get("total_time_s")
+    stats["optimality"] = {"direct": optimality_residuals(direct)}
+    fields = {name: getattr(direct, name) for name in Solution.__dataclass_fields__}
+    message = f"direct: {direct.message}; indirect: {reason}"
+    fields.update(method="both", status="failed", message=message, stats=stats)
+    return ComparedSolution(**fields, indirect=None)
+
+
 def _bvp_block(bvp: BVPSolution, solver: str, time_s: float) -> dict[str, Any]:
     return {
         "solver": solver,
@@ -152,7 +164,10 @@ def solve_both(
         ``method="both"``; ``status="solved"`` only if both methods reached ε = 1.
     """
     direct = solve_direct(problem, progress=progress, init=init)
-    indirect, bvp = indirect_continuation(problem, progress=progress)
+    try:
+        indirect, bvp = indirect_continuation(problem, progress=progress)
+    except (ArithmeticError, RuntimeError, ValueError) as exc:  # before any BVP: the direct solution is kept
+        return _direct_only(direct, exc)
     stats: dict[str, Any] = dict(direct.stats)
     stats["direct_time_s"] = direct.stats.get("total_time_s")
     stats["indirect"] = indirect.stats["indirect"]

@@ -24,7 +24,7 @@ from ..homotopy import run_continuation
 from ..model import Structure
 from ..problem import Problem
 from ..registries import BVP_SOLVERS
-from ..simulate import Trajectory, integrate
+from ..simulate import Trajectory, coast
 from ..solution import HomotopyStep, Solution, SolveStatus
 from .bvp_solvers import BVPSolution, BVPSolver, Guess
 from .hamiltonian import HamiltonianSystem, hamiltonian_system
@@ -54,7 +54,9 @@ def kalman_guess(
     t0, tf = problem.horizon.t0, problem.horizon.tf
     P = system.layout.pack(values)
     t = np.linspace(t0, tf, samples)
-    coasting = integrate(system.model, P, t)
+    # CVODES (BDF, compiled): a long horizon makes the Riccati equation stiff, where DOP853 crawled (tf = 1e12
+    # ran for minutes, found by a fuzzer); the same trajectory as integrate() within 2e-10 (ocp/simulate.py)
+    coasting = coast(system.model, P, t)
     x_of_t = CubicSpline(t, coasting.x)
     zero = np.zeros(system.structure.nu)
     free = ~system.fixed_terminal
@@ -64,15 +66,25 @@ def kalman_guess(
     def guess_at(eps: float) -> Guess:
         Pe = system.layout.pack({**values, "eps": eps})
         mu_T = eps * dPhi * free
-        adjoint = solve_ivp(
-            lambda tt, mu: np.asarray(system.costate_rhs(x_of_t(tt), zero, mu, Pe)).ravel(),
-            (tf, t0),
-            mu_T,
-            dense_output=True,
-            method="DOP853",
-            rtol=1e-10,
-            atol=1e-12 * scale,
-        )
+        try:
+            adjoint = solve_ivp(
+                lambda tt, mu: np.asarray(system.costate_rhs(x_of_t(tt), zero, mu, Pe)).ravel(),
+                (tf, t0),
+                mu_T,
+                dense_output=True,
+                method="LSODA",  # switches to BDF where the adjoint is stiff (the Riccati's rates, backwards)
+                rtol=1e-10,
+                atol=1e-12 * scale,
+            )
+        except ValueError as exc:  # e.g. steps below the resolution of the times (tf = 1e12: a fuzzer's)
+            adjoint = None
+            reason = str(exc)
+        if adjoint is None or not adjoint.success:
+            reason = reason if adjoint is None else adjoint.message
+            raise RuntimeError(
+                f"the ε = 0 (Kalman) guess: the adjoint equation could not be integrated over [{t0:g}, {tf:g}] "
+                f"({reason}); the direct method does not need it"
+            )
 
         def guess(times: np.ndarray) -> np.ndarray:
             return np.vstack([x_of_t(times).T, adjoint.sol(times)])
@@ -236,7 +248,7 @@ def _solve_seeded(problem: Problem, init: Solution) -> Solution | None:
     elapsed = time.perf_counter() - t_start
     system = hamiltonian_system(Structure.of(problem))
     P = system.layout.pack(system.layout.values(problem))
-    coasting = integrate(system.model, P, np.linspace(problem.horizon.t0, problem.horizon.tf, 401))
+    coasting = coast(system.model, P, np.linspace(problem.horizon.t0, problem.horizon.tf, 401))
     solution = solution_from_bvp(problem, bvp)
     solution.message = f"converged at ε = 1 from the states and costates of init ({init.method} method)"
     solution.baseline = {
