@@ -27,6 +27,7 @@ import numpy as np
 import xarray as xr
 from scipy.integrate import solve_ivp
 
+from ...core.ode_budget import bounded_rhs
 from .controls import FormationControl, FormationReference
 from .paths import path_deviation
 from .references import ReferenceSchedule
@@ -167,23 +168,23 @@ def _integrate(
     held: list[tuple[float, float] | None],
     t_eval: np.ndarray | None = None,
 ):
-    evaluations = [0]
     limit = MAX_EVALUATIONS_PER_STEP * max(1, len(t_eval) - 1 if t_eval is not None else 1)
 
     def rates(t: float, s: np.ndarray) -> np.ndarray:
-        evaluations[0] += 1
-        if evaluations[0] > limit:
-            raise RuntimeError(
-                f"the integrator needed more than {limit:.3g} evaluations on [{span[0]:g}, {span[1]:g}] s "
-                f"({MAX_EVALUATIONS_PER_STEP} per output step; stopped at t = {t:.6g} s): the dynamics are too fast "
-                "for the time step (speeds, turn rates, frequencies or gains)"
-            )
         poses = s.reshape(-1, 3)
         v, w = _agent_inputs(problem, t, poses, reference_at, held)
         return unicycle_rates(poses, v, w).ravel()  # docs/theory/leader_follower.md, eq. leader_follower.1
 
+    def too_fast(t: float) -> RuntimeError:
+        return RuntimeError(
+            f"the integrator needed more than {limit:.3g} evaluations on [{span[0]:g}, {span[1]:g}] s "
+            f"({MAX_EVALUATIONS_PER_STEP} per output step; stopped at t = {t:.6g} s): the dynamics are too fast "
+            "for the time step (speeds, turn rates, frequencies or gains)"
+        )
+
     cfg = problem.integration
-    sol = solve_ivp(rates, span, state, method=cfg.method, rtol=cfg.rtol, atol=cfg.atol, t_eval=t_eval)
+    bounded = bounded_rhs(rates, limit, too_fast)
+    sol = solve_ivp(bounded, span, state, method=cfg.method, rtol=cfg.rtol, atol=cfg.atol, t_eval=t_eval)
     if not sol.success:
         raise RuntimeError(f"solve_ivp failed on [{span[0]:g}, {span[1]:g}] s: {sol.message}")
     return sol

@@ -28,6 +28,7 @@ import numpy as np
 
 from ...core.config import ConfigError
 from ...core.interrupts import raise_if_interrupted
+from ...core.ode_budget import bounded_rhs
 from ...estimation.cooperative.information_model import formation_center, rotation
 from ..jacobi import JacobiTransform
 from ..level_curve import LEVEL_FUNCTIONS, LevelCurveController
@@ -364,19 +365,15 @@ MAX_EVALUATIONS_PER_PERIOD = 20_000
 
 def _bounded(rhs: Any, start: float) -> Any:
     """``rhs`` raising :class:`ReplayError` once called more than :data:`MAX_EVALUATIONS_PER_PERIOD` times."""
-    calls = [0]
 
-    def counted(t: float, y: np.ndarray) -> np.ndarray:
-        calls[0] += 1
-        if calls[0] > MAX_EVALUATIONS_PER_PERIOD:
-            raise ReplayError(
-                f"the closed loop is too stiff to integrate: more than {MAX_EVALUATIONS_PER_PERIOD} evaluations "
-                f"within the filter period from t = {start:.6g} (reached t = {t:.6g}); lower the gains of the "
-                "formation or the motion, or the time step"
-            )
-        return rhs(t, y)
+    def too_stiff(t: float) -> ReplayError:
+        return ReplayError(
+            f"the closed loop is too stiff to integrate: more than {MAX_EVALUATIONS_PER_PERIOD} evaluations "
+            f"within the filter period from t = {start:.6g} (reached t = {t:.6g}); lower the gains of the "
+            "formation or the motion, or the time step"
+        )
 
-    return counted
+    return bounded_rhs(rhs, MAX_EVALUATIONS_PER_PERIOD, too_stiff)
 
 
 def _progress(enabled: bool, total: int, name: str) -> tuple[Any, Any] | None:

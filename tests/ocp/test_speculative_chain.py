@@ -79,6 +79,17 @@ def _payloads() -> list[dict[str, Any]]:
     return payloads
 
 
+def _seeds_seen_twice_as_costly(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The client's view of every share's start: another optimum, twice as costly (the speculation is lost)."""
+    real = engine.best_seed
+
+    def far_seed(records: list[dict[str, Any]]) -> dict[str, Any] | None:
+        seed = real(records)
+        return None if seed is None else {**seed, "cost": 2 * seed["cost"]}
+
+    monkeypatch.setattr(engine, "best_seed", far_seed)
+
+
 def _run(
     payloads: list[dict[str, Any]],
     monkeypatch: pytest.MonkeyPatch,
@@ -138,13 +149,7 @@ def test_a_partner_chain_that_agrees_with_the_head_keeps_its_rows(monkeypatch):
 @pytest.mark.slow
 def test_a_partner_chain_that_disagrees_with_the_head_is_solved_again_from_it(monkeypatch):
     payloads = _payloads()
-    real = engine.best_seed
-
-    def far_seed(records: list[dict[str, Any]]) -> dict[str, Any] | None:
-        seed = real(records)  # the client's view of the partner's start: another optimum, twice as costly
-        return None if seed is None else {**seed, "cost": 2 * seed["cost"]}
-
-    monkeypatch.setattr(engine, "best_seed", far_seed)
+    _seeds_seen_twice_as_costly(monkeypatch)
     client, rows = _run(payloads, monkeypatch, partner_links_first=1)
     assert sorted(i for i, _ in rows) == list(range(6))  # every task once: the speculative rows were dropped
     assert [k for k in client.cancelled if k.startswith("task-4-")]  # the speculative link still waiting
@@ -158,9 +163,7 @@ def test_a_partner_chain_that_disagrees_with_the_head_is_solved_again_from_it(mo
 @pytest.mark.slow
 def test_a_partner_link_finished_with_the_head_that_drops_it_is_ignored(monkeypatch):
     payloads = _payloads()
-    real = engine.best_seed
-    monkeypatch.setattr(engine, "best_seed", lambda records: None if (seed := real(records)) is None
-                        else {**seed, "cost": 2 * seed["cost"]})  # fmt: skip
+    _seeds_seen_twice_as_costly(monkeypatch)
     _, rows = _run(payloads, monkeypatch, partner_links_first=1, together=True)
     assert sorted(i for i, _ in rows) == list(range(6))  # every task once, none from the dropped speculation
     assert all(row["status"] == "solved" for _, row in rows)
@@ -199,9 +202,7 @@ def test_the_head_chain_goes_on_before_its_head_is_decided_and_keeps_its_rows(mo
 @pytest.mark.slow
 def test_a_head_chain_that_disagrees_with_its_head_is_solved_again_after_it(monkeypatch):
     payloads = _payloads()
-    real = engine.best_seed
-    monkeypatch.setattr(engine, "best_seed", lambda records: None if (seed := real(records)) is None
-                        else {**seed, "cost": 2 * seed["cost"]})  # fmt: skip
+    _seeds_seen_twice_as_costly(monkeypatch)
     client, rows = _run(payloads, monkeypatch, partner_links_first=1, own_links_first=1)
     assert sorted(i for i, _ in rows) == list(range(6))  # every task once; the head is not solved again
     assert sum(k.startswith("task-2-") for k in client.ran) == 1
