@@ -367,7 +367,7 @@ class FieldSpec(StrictModel):
                 raise InvalidValue(key, rest) from None
             raise InvalidValue(self.kind, message) from None
         for key, value in parameters.items():  # a boolean or string the constructor turned into a number silently
-            found = _bad_number(value, key, _numeric(signature[key].annotation))
+            found = _bad_number(value, key, True) if _numeric(signature[key].annotation) else None
             if found is not None:
                 raise InvalidValue(*found)
         return self

@@ -315,9 +315,12 @@ def predicted_covariance(solution: Solution, times: np.ndarray) -> np.ndarray:
 
 # ------------------------------------------------------------------------------------------ together
 def replay_solution(
-    scenario: OcpReplayScenario, solution: Solution, seed: int | None = None
+    scenario: OcpReplayScenario, solution: Solution, seed: int | None = None, source: str = ""
 ) -> tuple[Any, dict[str, Any]]:
     """Track the solution's paths and validate its covariance by Monte Carlo.
+
+    Gains too fast to integrate over the plan raise ``ConfigError`` naming ``source`` (the scenario file)
+    before anything runs (:meth:`TrackingGains.check_horizon`).
 
     Returns
     -------
@@ -343,7 +346,7 @@ def replay_solution(
     mc = scenario.monte_carlo
     steps = max(1, int(round((tf - t0) / mc.time_step)))
     times = np.linspace(t0, tf, steps + 1)
-    scenario.tracking.check_horizon(tf - t0)
+    scenario.tracking.check_horizon(tf - t0, source)
     reference = ReferenceTrajectory.from_solution(solution)
     offset = None if scenario.initial_offset is None else np.asarray(scenario.initial_offset, float)
     r, v = simulate_tracking(reference, scenario.tracking.build(), times, scenario.platforms.build(), offset)

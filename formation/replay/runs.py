@@ -192,9 +192,7 @@ def run_plan_replay(scenario: Any, source: Path, seed: int | None = None) -> Pla
             f"{source}: initial_offset: expected {N} offsets (one per sensor of the solution), "
             f"got {len(scenario.initial_offset)}"
         )
-    horizon = solution.problem.horizon
-    scenario.tracking.check_horizon(horizon.tf - horizon.t0, str(source))
-    ds, summary = replay_solution(scenario, solution, seed)
+    ds, summary = replay_solution(scenario, solution, seed, str(source))
     summary = {
         "scenario": scenario.name,
         "file": str(source),

@@ -302,13 +302,14 @@ class ChainLinks:
 
     def _fair_share(self) -> int:
         """The most tasks this link may take from a shared arc (0: wait for the tasks in flight)."""
-        others = [c for c in self.arc.ends if c is not self] if self.arc is not None else []
-        if not others or self.arc is None:
+        arc = self.arc
+        others = [] if arc is None else [c for c in arc.ends if c is not self]
+        if arc is None or not others:
             return self.longest
         paces = [c.pace for c in (self, *others) if c.pace]
         default = sum(paces) / len(paces) if paces else 1.0
         rates = [1.0 / (c.pace or default) for c in (self, *others)]
-        work = self.arc.remaining + sum(c.in_flight for c in (self, *others))
+        work = arc.remaining + sum(c.in_flight for c in (self, *others))
         share = work * rates[0] / sum(rates) - self.in_flight  # tasks still to take to end with the others
         if share <= 0:
             return 0 if self.in_flight else 1

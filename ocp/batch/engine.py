@@ -326,8 +326,7 @@ class _TaskRun:
         share = self.speculating.pop(q)
         seed = best_seed(share.result()) if share.done() and share.status == "finished" else None
         row = (head or {}).get("row", {})
-        owner = q if self.seeded_by[q] is None else self.seeded_by[q]  # the chain whose first task is the head
-        head_task = self.queues[owner].first
+        head_task = self.queues[self.owner(q)].first
         agreement = task_problem(self.payloads[head_task]).solver.agreement
         agrees = (
             seed is not None
@@ -341,20 +340,22 @@ class _TaskRun:
             return
         self.solve_again(q)
 
+    def owner(self, q: int) -> int:
+        """The chain whose first task is the head chain ``q`` went on from (``q`` itself, or its pair's)."""
+        return q if self.seeded_by[q] is None else self.seeded_by[q]
+
     def solve_again(self, q: int) -> None:
         """A speculation of chain ``q`` is lost: forget its futures and solve it again from its head."""
-        owner = q if self.seeded_by[q] is None else self.seeded_by[q]
         stale = [f for f, (_, chain, _) in self.futures.items() if chain == q]
         self.client.cancel(stale)
         for f in stale:
             del self.futures[f]
         self.generation[q] += 1
         self.pending[q] = 0
-        if owner == q:  # the head's own chain: its head stays solved, the rest is solved again from it
-            self.queues[q].restart(self.handed_on)
+        self.queues[q].restart(self.handed_on)
+        if self.owner(q) == q:  # the head's own chain: its head stays solved, the rest is solved again from it
             self.last[q] = self.heads[q]
         else:
-            self.queues[q].restart(self.handed_on)
             self.last.pop(q, None)
             self.heads.pop(q, None)
         self.fill(q)
