@@ -37,7 +37,8 @@ def cli_reference() -> str:
         "",
         "Generated from the argument parser of `mobisense` (`mobisense COMMAND --help` prints the same).",
         "Exit status: 0 success, 1 solver or simulation failure (results so far are kept), 2 invalid input",
-        "(one line naming the file and the key path, nothing written), 130 interrupted.",
+        "(one line naming the file and the key path, nothing written), 130 interrupted (Ctrl-C or SIGTERM;",
+        "a solve stops within one Ipopt iteration, a replay within one step).",
         "",
         "Every command that reads a file also accepts the name of a shipped example "
         "(`mobisense solve hussein2008`; see `mobisense examples`).",

@@ -18,6 +18,7 @@ import subprocess
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 from hostile.harness import GOOD, RECORD, Outcome, attack, classify, finish, start, temporaries
@@ -225,6 +226,37 @@ def test_long_runs_stop_soon_after_ctrl_c(tmp_path, command, example, after):
     # one L-BFGS iteration or one replay step, then the clean-up (the whole runs take 32 s and 8 s here)
     assert outcome.seconds < 10, outcome.seconds
     assert not out.exists()  # the folder the run created is removed: nothing half-done is left
+
+
+def _one_long_ipopt_call(tmp_path: Path) -> Path:
+    """A direct problem solved by one Ipopt call of ≈ 14 s (n = N = 4, K = 150, strategy cold, no compiling)."""
+    rng = np.random.default_rng(1)
+    n = 4
+    data = {
+        "name": "one_long_ipopt_call",
+        "horizon": {"t0": 0.0, "tf": 10.0},
+        "process": {"A": (-0.3 * np.eye(n) + 0.1 * rng.standard_normal((n, n))).tolist(), "B": np.eye(n).tolist(),
+                    "Q": np.eye(n).tolist(), "Sigma0": (20 * np.eye(n)).tolist(),
+                    "locations": rng.uniform(-5, 5, (n, 2)).tolist()},
+        "sensors": [{"name": f"s{i}", "p0": rng.uniform(-8, 8, 2).tolist(), "v0": [0.0, 0.0],
+                     "noise": {"model": "quadratic_range", "beta": 1.0, "gamma": 1.0}} for i in range(4)],
+        "cost": {"M": np.eye(n).tolist(), "K": np.eye(n).tolist(), "alpha": 0.1},
+        "solver": {"method": "direct", "collocation": {"scheme": "radau", "degree": 3, "intervals": 150},
+                   "strategy": "cold", "codegen": "off"},
+    }  # fmt: skip
+    return KINDS["solve"].write(tmp_path, data)
+
+
+def test_ctrl_c_stops_a_long_direct_solve_within_an_iteration(tmp_path):
+    """Ctrl-C during one long Ipopt call of the direct method: held until Ipopt returned (11 s more here), now
+    the iteration callback stops Ipopt at its next iteration (≈ 0.14 s) and the command exits 130."""
+    out = tmp_path / "out"
+    path = _one_long_ipopt_call(tmp_path)
+    outcome = _interrupt("solve", KINDS["solve"].command(path, out), tmp_path, signal.SIGINT, 4.0)
+    outcome = classify(outcome, 130, ("interrupted",), tmp_path, None)
+    assert outcome.verdict in GOOD, outcome.problems
+    assert outcome.seconds < 4, outcome.seconds  # an iteration and the clean-up; the rest of the solve is ≥ 8 s
+    assert not out.exists()
 
 
 def test_solve_killed_then_rerun(tmp_path):

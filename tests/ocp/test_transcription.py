@@ -106,3 +106,35 @@ def test_optimum_equals_the_independent_plain_transcription():
         # stop at tol 1e-11 on the scaled error, so J agrees to ~1e-11 — 1e-8 is the issue's requirement
         assert abs(phi + running - r.J) <= 1e-8 * abs(r.J)
         assert mine.iterations <= 20
+
+
+def test_large_nlp_solves_carry_the_interrupt_check_and_a_spent_budget_does_not_stop_the_next_solve(monkeypatch):
+    """Above INTERRUPT_CHECK_VARIABLES every solve runs with the iteration callback, so that Ctrl-C stops Ipopt
+    within an iteration; a budgeted solve on it must not leave its budget to the next, unbudgeted one."""
+    from mobisense.core import interrupts
+    from mobisense.ocp.direct import transcription as module
+
+    problem = _bounded_problem(30)
+    tr = DirectCollocation(Structure.of(problem), "radau", 3, 30)
+    monkeypatch.setattr(module, "INTERRUPT_CHECK_VARIABLES", tr.nw)  # this NLP counts as large
+    P, w0 = coasting_start(problem, tr)
+    cut = tr.solve(P, w0, max_iterations=2)
+    assert cut.status == "User_Requested_Stop" and cut.iterations == 2
+    whole = tr.solve(P, w0)  # the same Ipopt instance (warm = False, callback attached), no budget now
+    assert whole.success and whole.iterations > 2, (whole.status, whole.iterations)
+    assert len(tr._solvers) == 1  # one instance serves both
+    # a signal arriving during the third iteration (what the callback sees): Ipopt stops there
+    from mobisense.ocp.direct import iteration_limit
+
+    calls = []
+    monkeypatch.setattr(iteration_limit, "interrupt_received", lambda: calls.append(1) or len(calls) >= 3)
+    stopped = tr.solve(P, w0)
+    assert stopped.status == "User_Requested_Stop" and stopped.iterations == 2  # Ipopt counts from iteration 0
+    # a signal recorded before Ipopt starts: nothing is solved, the interrupt is raised
+    monkeypatch.setattr(interrupts, "_received", [2])
+    with pytest.raises(KeyboardInterrupt):
+        tr.solve(P, w0)
+    monkeypatch.setattr(interrupts, "_received", [])
+    monkeypatch.undo()
+    monkeypatch.setattr(module, "INTERRUPT_CHECK_VARIABLES", tr.nw + 1)  # now small: no callback, a new instance
+    assert tr.solve(P, w0).success and len(tr._solvers) == 2
