@@ -48,8 +48,8 @@ def open_client(scheduler: str | None, workers: int | None, security: Any = None
     """A dask Client: on ``scheduler`` (``tls://…``, ``tcp://…``) or on a LocalCluster of ``workers`` processes.
 
     A scheduler that does not answer within :data:`CONNECT_TIMEOUT` seconds raises ``ConfigError``. Local
-    workers ignore SIGINT (:func:`mobisense.ocp.batch.worker.dask_setup`), so Ctrl-C stops the client, which
-    closes them, without a traceback from every worker.
+    workers start with SIGINT blocked and then ignore it (:func:`mobisense.ocp.batch.worker.dask_setup`), so
+    Ctrl-C stops the client, which closes them, without a traceback from every worker.
     """
     import os
     import warnings
@@ -80,6 +80,7 @@ def open_client(scheduler: str | None, workers: int | None, security: Any = None
     with (
         dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None, **LOCAL_CONFIG}),
         deferred_interrupts(raise_at_exit=False) as deferred,
+        _sigint_blocked_in_new_processes(),
     ):
         cluster = LocalCluster(
             n_workers=n,
@@ -97,6 +98,32 @@ def open_client(scheduler: str | None, workers: int | None, security: Any = None
     with cluster, client:
         deferred.check()  # Ctrl-C or SIGTERM during the start: stop now, closing the cluster cleanly
         yield client
+
+
+@contextlib.contextmanager
+def _sigint_blocked_in_new_processes() -> Iterator[None]:
+    """Block SIGINT in this thread, and so in the threads and processes started from here, inside the block.
+
+    A worker process imports dask for about a second before its :func:`~mobisense.ocp.batch.worker.dask_setup`
+    ignores SIGINT; a Ctrl-C in that second (sent to the whole process group) printed each worker's
+    ``KeyboardInterrupt`` traceback. A signal mask is inherited through ``fork`` and ``exec``: the workers, and
+    the event-loop threads that spawn them, start with SIGINT blocked and never see it. Here a SIGINT arriving
+    in the block stays pending and is delivered when the mask is restored (not lost). SIGTERM stays open: the
+    nannies stop their workers with it. The standard library's resource tracker, whose start unblocks SIGINT in
+    the thread that starts it (the nannies' event loop, spawning the workers just after), is started first.
+    """
+    import signal
+    from multiprocessing import resource_tracker
+
+    if not hasattr(signal, "pthread_sigmask"):  # not POSIX
+        yield
+        return
+    resource_tracker.ensure_running()
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def _probe(address: str) -> None:

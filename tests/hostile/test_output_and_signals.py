@@ -291,6 +291,19 @@ def test_sweep_interrupted_keeps_finished_rows(tmp_path, sig):
     assert len(table) == 12 and set(table["status"]) == {"solved"}
 
 
+@pytest.mark.parametrize("after", [0.7, 0.85, 1.0, 1.2])
+def test_ctrl_c_while_the_local_workers_start_prints_one_line(tmp_path, after):
+    """Ctrl-C reaches the whole process group; a worker still importing dask (its first second) printed its
+    KeyboardInterrupt traceback, 40–90 lines. Workers now start with SIGINT blocked. Wherever the signal lands
+    (before, during or after the cluster's start on a slower machine), one line and exit status 130."""
+    out = tmp_path / "out"
+    args = ["sweep", str(_slow_sweep(tmp_path)), "--out", str(out), "--workers", "2", "--quiet"]
+    outcome = _interrupt("sweep", args, tmp_path, signal.SIGINT, after)
+    outcome = classify(outcome, 130, ("interrupted",), tmp_path, None)
+    assert outcome.verdict in GOOD, outcome.problems
+    assert len(outcome.lines) == 1, outcome.stderr
+
+
 def test_sweep_killed_then_rerun(tmp_path):
     import pandas as pd
 
