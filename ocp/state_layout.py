@@ -10,6 +10,7 @@ Every method (direct, indirect), the solution and the replay read and write x th
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -20,6 +21,15 @@ __all__ = ["StateLayout", "sym_to_vec", "vec_to_sym", "triangle_labels", "diagon
 
 def _triangle(n: int) -> list[tuple[int, int]]:
     return [(i, j) for i in range(n) for j in range(i, n)]
+
+
+@functools.lru_cache(maxsize=64)
+def _triangle_indices(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(n)``, made once per n (read-only): a solve unpacks Σ several times per task."""
+    rows, cols = np.triu_indices(n)
+    rows.setflags(write=False)
+    cols.setflags(write=False)
+    return rows, cols
 
 
 def diagonal_indices(n: int) -> list[int]:
@@ -45,7 +55,7 @@ def sym_to_vec(S: Any, n: int) -> Any:
     ndarray, shape (..., n(n+1)/2), or CasADi column
     """
     if isinstance(S, np.ndarray):
-        rows, cols = np.triu_indices(n)
+        rows, cols = _triangle_indices(n)
         return S[..., rows, cols]
     import casadi as ca
 
@@ -66,7 +76,7 @@ def vec_to_sym(s: Any, n: int) -> Any:
     """
     if isinstance(s, np.ndarray):
         out = np.zeros(s.shape[:-1] + (n, n))
-        rows, cols = np.triu_indices(n)
+        rows, cols = _triangle_indices(n)
         out[..., rows, cols] = s
         out[..., cols, rows] = s
         return out
@@ -175,7 +185,7 @@ class StateLayout:
     def join_costate(self, Lam: np.ndarray, lam_p: np.ndarray, lam_v: np.ndarray) -> np.ndarray:
         """Inverse of :meth:`split_costate`."""
         lam = self.join(Lam, lam_p, lam_v)
-        rows, cols = np.triu_indices(self.n)
+        rows, cols = _triangle_indices(self.n)
         lam[..., self.sigma] *= np.where(rows == cols, 1.0, 2.0)
         return lam
 

@@ -90,10 +90,9 @@ def solve_direct(
     }
     kept: Continuation | None = None
     if init is not None:
-        warm = ctx.start("warm start")
-        start = _start_from_solution(init, warm)
+        start, warm = _start_from_solution(init, ctx)
         stats["start"] = start
-        if start is StartKind.WARM:
+        if warm is not None:
             if warm.attempt(1.0):
                 kept = warm
             else:
@@ -190,16 +189,18 @@ def _context(
     return ctx, coasting, order
 
 
-def _start_from_solution(init: Solution | dict[str, Any], run: Continuation) -> StartKind:
-    """Load ``init``'s primal–dual point into ``run`` if its NLP has the same layout; say what happened."""
+def _start_from_solution(init: Solution | dict[str, Any], ctx: SolveContext) -> tuple[StartKind, Continuation | None]:
+    """The start from ``init``'s primal–dual point if its NLP has the same layout (else None); what happened.
+
+    The coasting guess is not made for it (a warm-started sweep task never needs it).
+    """
     nlp = init.nlp if isinstance(init, Solution) else init
     if nlp is None or (isinstance(init, Solution) and init.eps != 1.0):
-        return StartKind.INIT_WITHOUT_POINT
-    if nlp["signature"] != repr(run.tr.signature):
-        return StartKind.INIT_OTHER_LAYOUT
-    w, lam_w, lam_g = run.tr.transfer(nlp["w"], nlp["lam_w"], nlp["lam_g"], nlp["P"], run.parameters(1.0))
-    run.restart(w, lam_w, lam_g)
-    return StartKind.WARM
+        return StartKind.INIT_WITHOUT_POINT, None
+    if nlp["signature"] != repr(ctx.tr.signature):
+        return StartKind.INIT_OTHER_LAYOUT, None
+    w, lam_w, lam_g = ctx.tr.transfer(nlp["w"], nlp["lam_w"], nlp["lam_g"], nlp["P"], ctx.parameters(1.0))
+    return StartKind.WARM, ctx.start("warm start", w, lam_w, lam_g)
 
 
 def _assemble(

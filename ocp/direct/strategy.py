@@ -191,10 +191,6 @@ class Continuation:
                 ctx.progress(step)
         return run
 
-    def restart(self, w: np.ndarray, lam_w: np.ndarray | None = None, lam_g: np.ndarray | None = None) -> None:
-        """Continue from another primal (and dual) point."""
-        self.w, self.lam_w, self.lam_g = w, lam_w, lam_g
-
     @property
     def solved(self) -> bool:
         """True when this start converged at ε = 1."""
