@@ -14,6 +14,8 @@ from .solving import solve
 if TYPE_CHECKING:
     from rich.table import Table
 
+    from .direct.iteration_limit import IpoptIteration
+
 __all__ = ["SolveReporter"]
 
 
@@ -25,11 +27,13 @@ class SolveReporter:
         self.quiet = quiet
 
     def run(self, method: str) -> Solution:
-        """Solve with ``method``, updating a progress bar after each ε step."""
+        """Solve with ``method``, updating a progress bar after each ε step and each iteration of a long Ipopt call."""
         if self.quiet:
             return solve(self.problem, method)
         from rich.console import Console
         from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+        from .direct.iteration_limit import watch_iterations
 
         h = self.problem.solver.homotopy
         total = 1 if h.mode == "none" else (len(fixed_schedule(h.step)) if h.mode == "fixed" else None)
@@ -55,7 +59,13 @@ class SolveReporter:
                     info=f"ε = {step.eps:.3g}  J_ε = {step.cost:.6g}  {step.iterations} it {mark}",
                 )
 
-            return solve(self.problem, method, progress=on_step)
+            def on_iteration(it: IpoptIteration) -> None:  # a long Ipopt call (large NLPs, fields)
+                # Ipopt's own names: the objective (J over its scale) and inf_pr (largest constraint violation)
+                progress.update(task, info=f"Ipopt iteration {it.iteration}: objective {it.objective:.5g}, "
+                                f"inf_pr {it.violation:.1e}")  # fmt: skip
+
+            with watch_iterations(on_iteration):
+                return solve(self.problem, method, progress=on_step)
 
     def report(self, solution: Solution, out: Path) -> None:
         """Print the cost split, homotopy summary and timings."""

@@ -202,11 +202,13 @@ class FieldShooting:
             if time_limit is not None:
                 ipopt["max_wall_time"] = float(time_limit)
             if self.interrupt is None:  # stops Ipopt within an iteration of Ctrl-C (one solve can take a minute)
-                self.interrupt = IterationLimit(self.nlp["x"].numel(), self.nlp["g"].numel(), self.nlp["p"].numel())
+                self.interrupt = IterationLimit(self.nlp["x"].numel(), self.nlp["g"].numel(), self.nlp["p"].numel(),
+                                                self.lbg, self.ubg)
             self.solvers[key] = ca.nlpsol("field_shooting", "ipopt", self.nlp,
                                           {"ipopt": ipopt, "print_time": False, "error_on_fail": False,
                                            "iteration_callback": self.interrupt})  # fmt: skip
         solver = self.solvers[key]
+        self.interrupt.reset(None)  # iterations reported from 0 for each solve
         raise_if_interrupted()
         sol = solver(x0=w, p=self.parameters(eps, cost_scale), lbg=self.lbg, ubg=self.ubg)
         raise_if_interrupted()  # Ipopt stopped by the callback: the interrupt, not a result

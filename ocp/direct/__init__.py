@@ -20,5 +20,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "clear_transcription_cache": "mobisense.ocp.direct.transcription",
         "solution_sensitivities": "mobisense.ocp.direct.sensitivities",
         "resimulate_sensors": "mobisense.ocp.direct.path_report",
+        "watch_iterations": "mobisense.ocp.direct.iteration_limit",
+        "IpoptIteration": "mobisense.ocp.direct.iteration_limit",
     },
 )

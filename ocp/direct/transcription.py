@@ -204,7 +204,7 @@ class DirectCollocation:
             extra: dict[str, Any] = {}
             if checked:
                 if self._limit is None:
-                    self._limit = IterationLimit(self.nw, self.ng, self.layout.size)
+                    self._limit = IterationLimit(self.nw, self.ng, self.layout.size, *self._bounds[2:])
                 extra["iteration_callback"] = self._limit
             self._solvers[(warm, checked)] = self._nlpsol(options, extra)
         return self._solvers[(warm, checked)], checked

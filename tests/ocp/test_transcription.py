@@ -138,3 +138,35 @@ def test_large_nlp_solves_carry_the_interrupt_check_and_a_spent_budget_does_not_
     monkeypatch.undo()
     monkeypatch.setattr(module, "INTERRUPT_CHECK_VARIABLES", tr.nw + 1)  # now small: no callback, a new instance
     assert tr.solve(P, w0).success and len(tr._solvers) == 2
+
+
+def test_watched_iterations_are_reported_with_ipopts_objective_and_violation(monkeypatch):
+    """Inside watch_iterations a solve with the callback reports each iteration: counted from 0, the last one
+    Ipopt's final objective and a violation within its tolerance; a listener that raises is dropped, the solve
+    goes on."""
+    from mobisense.ocp.direct import transcription as module
+    from mobisense.ocp.direct.iteration_limit import watch_iterations
+
+    problem = _bounded_problem(20)
+    tr = DirectCollocation(Structure.of(problem), "radau", 3, 20)
+    monkeypatch.setattr(module, "INTERRUPT_CHECK_VARIABLES", tr.nw)
+    P, w0 = coasting_start(problem, tr)
+    seen = []
+    with watch_iterations(seen.append):
+        result = tr.solve(P, w0)
+    assert result.success
+    assert [it.iteration for it in seen] == list(range(result.iterations + 1))  # iteration 0 is the start
+    assert seen[-1].objective == pytest.approx(result.objective, rel=1e-12)
+    # the scaled violation at convergence: Ipopt's tol 1e-9 bounds it (its constr_viol_tol 1e-4 is looser)
+    assert seen[-1].violation <= 1e-8
+    assert seen[0].violation > 1e-3  # the coasting guess breaks the terminal velocity of sensor 1
+
+    def broken(_):
+        raise RuntimeError("a display error")
+
+    with watch_iterations(broken):
+        again = tr.solve(P, w0)
+    assert again.success and again.iterations == result.iterations  # the same solve, undisturbed
+    seen.clear()
+    again = tr.solve(P, w0)  # outside the block: nothing reported
+    assert seen == []
