@@ -192,13 +192,20 @@ class DirectCollocation:
         return self._derivatives
 
     # ------------------------------------------------------------------ solving
-    def _solver(self, warm: bool, limited: bool = False) -> tuple[Any, bool]:
-        """The Ipopt instance of a warm or cold, budgeted or unbudgeted solve, and whether it has the callback.
+    def _checked(self, limited: bool) -> bool:
+        """Whether a solve runs with the iteration callback (:class:`IterationLimit`).
 
-        The callback (:class:`IterationLimit`) counts a budgeted solve's iterations and stops any solve of a
-        large NLP (:data:`INTERRUPT_CHECK_VARIABLES`) within an iteration of Ctrl-C or SIGTERM.
+        A budgeted solve does, and any solve of a large NLP (:data:`INTERRUPT_CHECK_VARIABLES`), which Ctrl-C
+        then stops within an iteration.
         """
-        checked = limited or self.nw >= INTERRUPT_CHECK_VARIABLES
+        return limited or self.nw >= INTERRUPT_CHECK_VARIABLES
+
+    def _solver(self, warm: bool, limited: bool = False) -> Any:
+        """The Ipopt instance of a warm or cold, budgeted or unbudgeted solve.
+
+        Where every solve has the callback, one instance serves budgeted and unbudgeted solves.
+        """
+        checked = self._checked(limited)
         if (warm, checked) not in self._solvers:
             options = {**(WARM_START if warm else COLD_START), **self.ipopt_options}
             extra: dict[str, Any] = {}
@@ -207,7 +214,7 @@ class DirectCollocation:
                     self._limit = IterationLimit(self.nw, self.ng, self.layout.size, *self._bounds[2:])
                 extra["iteration_callback"] = self._limit
             self._solvers[(warm, checked)] = self._nlpsol(options, extra)
-        return self._solvers[(warm, checked)], checked
+        return self._solvers[(warm, checked)]
 
     def _nlpsol(self, options: dict[str, Any], extra: dict[str, Any]) -> BufferedFunction:
         settings = {"ipopt": options, "print_time": False, "error_on_fail": False, "calc_lam_p": False}
@@ -248,8 +255,8 @@ class DirectCollocation:
         on top of the transcription's ``max_iter``.
         """
         warm = lam_w0 is not None and lam_g0 is not None
-        solver, checked = self._solver(warm, max_iterations is not None)
-        if checked and self._limit is not None:
+        solver = self._solver(warm, max_iterations is not None)
+        if self._checked(max_iterations is not None) and self._limit is not None:
             self._limit.reset(max_iterations)  # None: no budget, only the interrupt check
         lbw, ubw, lbg, ubg = self.bounds()
         args: dict[str, Any] = {"x0": w0, "p": P, "lbx": lbw, "ubx": ubw, "lbg": lbg, "ubg": ubg}
