@@ -28,7 +28,7 @@ from ..problem import Problem
 from ..registries import NOISE_MODELS
 from . import kernels as kernels_module
 from .assembly import assemble, index_maps, with_step
-from .iteration_limit import IterationLimit
+from .iteration_limit import INTERRUPT_CHECK_VARIABLES, IterationLimit
 from .kernel_cache import load_compiled, source_digest
 from .kernels import IntervalKernels, condensing_matrices
 from .numeric_calls import BufferedFunction, ParameterMemo
@@ -81,11 +81,6 @@ WARM_START: dict[str, Any] = {
 CODEGEN_MODES = ("auto", "on", "off")
 #: ``auto`` compiles kernels up to this many SX instructions in all (n = 4, N = 4: 133 000, 12 s once)
 AUTO_COMPILE_INSTRUCTIONS = 250_000
-#: NLPs with at least this many variables get the iteration callback on every solve, so that Ctrl-C or SIGTERM
-#: stops Ipopt within one iteration (a solve of n = N = 4, K = 300 is one 50-s Ipopt call). It costs ≈ 40 µs
-#: per iteration (CasADi hands the callback the iterate): 2.6 % of an iteration of n = N = 1, K = 60 (780
-#: variables, 1.3 ms per cold iteration), 1 % at K = 200 (2600 variables, 3.9 ms) and 0.8 % at K = 800 (10 400)
-INTERRUPT_CHECK_VARIABLES = 4000
 
 
 @dataclass
