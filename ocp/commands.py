@@ -46,10 +46,16 @@ class SolveCommand:
             "--homotopy",
             choices=HOMOTOPY_MODES.names(),
             default=None,
-            help="override solver.homotopy.mode (the ε-continuation: always run by --strategy homotopy, by auto only "
-            "when its starts disagree)",
+            help="override solver.homotopy.mode (the ε-continuation: always started by --strategy homotopy, by auto "
+            "only when its starts disagree; both within --homotopy-budget)",
         )
         parser.add_argument("--step", type=float, default=None, help="override solver.homotopy.step (δ)")
+        parser.add_argument(
+            "--homotopy-budget", type=_homotopy_budget, default=None, metavar="B",
+            help="override solver.homotopy.budget: the continuation may take at most B × the cold solve's Ipopt "
+            "iterations (default 1.5; beyond, it stops and the cold solve is kept), or 'none': no limit, the "
+            "continuation runs to ε = 1 (with --strategy homotopy, then without a cold solve)",
+        )  # fmt: skip
         parser.add_argument(
             "--strategy",
             choices=STRATEGIES.names(),
@@ -190,6 +196,23 @@ def _names(text: str) -> list[str]:
     return names
 
 
+#: what ``--homotopy-budget`` accepts for "no limit" (YAML ``budget: null``)
+_NO_BUDGET = "none"
+
+
+def _homotopy_budget(text: str) -> float | str:
+    """The argparse type of ``--homotopy-budget``: a number in (0, 1000] or ``none``."""
+    if text.strip().lower() == _NO_BUDGET:
+        return _NO_BUDGET
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number in (0, 1000] or 'none', got {text[:40]!r}") from None
+    if not 0.0 < value <= 1000.0:
+        raise argparse.ArgumentTypeError(f"expected a number in (0, 1000] or 'none', got {text[:40]}")
+    return value
+
+
 def _local_workers(requested: int | None) -> int:
     import os
 
@@ -226,6 +249,9 @@ def apply_overrides(data: dict[str, Any], args: argparse.Namespace) -> dict[str,
     if collocation:
         solver.setdefault("collocation", {}).update(collocation)
     homotopy = {k: v for k, v in (("mode", args.homotopy), ("step", args.step)) if v is not None}
+    budget = getattr(args, "homotopy_budget", None)
+    if budget is not None:
+        homotopy["budget"] = None if budget == _NO_BUDGET else budget
     if homotopy:
         solver.setdefault("homotopy", {}).update(homotopy)
     return data

@@ -1,7 +1,7 @@
 """Figures of a solution: paths, Σ(t) against the no-control baseline, u(t), the homotopy and the continuation.
 
 ``paths.png`` (paths over the noise level, homotopy paths coloured by ε), ``covariance.png``,
-``controls.png``, ``homotopy.png`` (J_ε and iterations per ε step) and, when the indirect method ran,
+``controls.png``, ``homotopy.png`` (J_ε and iterations per ε step of each start) and, when the indirect method ran,
 ``continuation.png`` (the arclength continuation in ε with its folds).
 """
 
@@ -155,26 +155,70 @@ def plot_controls(solution: Solution):  # noqa: ANN201
 
 
 def plot_homotopy(solution: Solution):  # noqa: ANN201
-    """J_ε and the solver iterations of each step of the ε continuation."""
+    """J_ε and the solver iterations of every step, one series per start (cold, random starts, the continuation).
+
+    When no start stepped in ε (strategy ``auto`` whose starts agreed at ε = 1), the starts side by side: each
+    one's J at ε = 1 and its iterations, the kept one marked. A continuation stopped by its iteration budget
+    (``solver.homotopy.budget``) ends in a square, not a cross: it did not fail, it was not allowed to go on.
+    """
     import matplotlib.pyplot as plt
 
     steps = solution.homotopy
-    fig, ax = plt.subplots(figsize=(6.4, 4.0))
-    ok = [s for s in steps if s.success]
-    bad = [s for s in steps if not s.success]
+    label = {"": solution.method}  # an indirect or shooting continuation has no start label
+    starts = list(dict.fromkeys(label.get(s.start, s.start) for s in steps))
+    by_start = {name: [s for s in steps if label.get(s.start, s.start) == name] for name in starts}
+    kept = (solution.stats.get("strategy") or {}).get("kept")
     iterations = "Newton iterations (BVP)" if solution.method == "indirect" else "Ipopt iterations"
+    fig, ax = plt.subplots(figsize=(6.8, 4.2))
     ax2 = ax.twinx()
-    ax2.bar([s.eps for s in steps], [s.iterations for s in steps], width=0.02, alpha=0.3, color="grey")
-    ax2.set_ylabel(f"{iterations} of the step (grey bars)")
     ax.set_zorder(ax2.get_zorder() + 1)
     ax.patch.set_visible(False)
-    ax.plot([s.eps for s in ok], [s.cost for s in ok], "o-", label="J_ε of the converged steps")
-    if bad:
-        ax.plot([s.eps for s in bad], [s.cost for s in bad], "rx", ms=9, label="failed steps")
+    ax.ticklabel_format(axis="y", useOffset=False)
+    if not any(s.eps < 1.0 for s in steps):  # no continuation: the starts at ε = 1 side by side
+        x = np.arange(len(starts))
+        ax2.bar(x, [sum(s.iterations for s in by_start[n]) for n in starts], width=0.5, alpha=0.3, color="grey")
+        for i, name in enumerate(starts):
+            ok = [s.cost for s in by_start[name] if s.success]
+            if ok:
+                ax.plot(i, ok[-1], "*" if name == kept else "o", ms=14 if name == kept else 8, color="tab:blue")
+            else:
+                ax.plot(i, by_start[name][-1].cost, "rx", ms=9)
+        title = "starts of the solve at ε = 1 (no continuation ran)"
+        costs = np.array([s.cost for s in steps if np.isfinite(s.cost)])
+        if costs.size:  # starts that agree to round-off would fill the axis with their last digits
+            middle, half = 0.5 * (costs.max() + costs.min()), 0.5 * np.ptp(costs)
+            half = max(1.2 * half, 1e-6 * abs(middle), 1e-300)
+            ax.set_ylim(middle - half, middle + half)
+            title += f"\ntheir J {np.ptp(costs) / max(abs(middle), 1e-300):.1e} relative apart"
+        ax.set_xticks(x, [f"{n}{' (kept)' if n == kept else ''}" for n in starts], rotation=20, fontsize=8)
+        ax.set_xlabel("start (solver.strategy)")
+        ax.set_ylabel("J at ε = 1 (blue; red ×: not converged)")
+        ax2.set_ylabel(f"{iterations} of the start (grey bars)")
+        ax.set_title(title, fontsize=10)
+        return fig
+    width = 0.8 * min([0.02, *np.diff(sorted({s.eps for s in steps}))]) / max(len(starts), 1)
+    for k, name in enumerate(starts):
+        run = by_start[name]
+        ax2.bar([s.eps + (k - (len(starts) - 1) / 2) * width for s in run], [s.iterations for s in run],
+                width=width, alpha=0.3, color=f"C{k}")  # fmt: skip
+        ok = [s for s in run if s.success]
+        tag = f"{name}{' (kept)' if name == kept else ''}"
+        if ok:
+            ax.plot([s.eps for s in ok], [s.cost for s in ok], "o-" if len(ok) > 1 else "o", color=f"C{k}",
+                    label=f"{tag}: J_ε of its converged steps")  # fmt: skip
+        stopped = [s for s in run if not s.success and s.status == "User_Requested_Stop"]
+        failed = [s for s in run if not s.success and s.status != "User_Requested_Stop"]
+        if stopped:
+            ax.plot([s.eps for s in stopped], [s.cost for s in stopped], "s", mfc="none", mec=f"C{k}", ms=9,
+                    label=f"{name}: stopped, iteration budget spent")  # fmt: skip
+        if failed:
+            ax.plot([s.eps for s in failed], [s.cost for s in failed], "x", color="red", ms=9,
+                    label=f"{name}: failed steps")  # fmt: skip
+    ax2.set_ylabel(f"{iterations} of the step (bars)")
     ax.set_xlabel("ε (homotopy parameter; 1: the original problem)")
     ax.set_ylabel("cost J_ε")
-    ax.set_title("homotopy path")
-    ax.legend(loc="upper right")
+    ax.set_title("homotopy path" + (" of each start" if len(starts) > 1 else f" ({starts[0]})"))
+    ax.legend(loc="upper right", fontsize=8)
     return fig
 
 

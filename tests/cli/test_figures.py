@@ -134,3 +134,29 @@ def test_simulation_and_design_figures(checked, tmp_path):
     _clean(checked, {"ring/paths.png", "ring/active_pairs.png", "ramp/references.png",
                      "ramp/formation_errors.png", "ramp/reference_point_errors.png", "ramp/deviation.png",
                      "distributed/paths.png", "distributed/estimates.png", "design/trace_contour.png"})  # fmt: skip
+
+
+@pytest.mark.slow
+def test_homotopy_figure_keeps_each_start_on_its_own_line(checked, tmp_path):
+    """The steps of all starts used to be one line: a continuation stopped by its budget at ε = 0.4 was drawn
+    joined to the cold solve at ε = 1, as if it had arrived there, and its stop marked as a failure."""
+    from reference_problems import hussein2008
+
+    import mobisense as ms
+    from mobisense.ocp.plots import plot_homotopy, save_figures
+
+    data = hussein2008(collocation={"intervals": 20}, homotopy={"step": 0.05}, strategy="homotopy")
+    solution = ms.solve(ms.Problem.from_dict(data))
+    record = solution.stats["strategy"]
+    stopped = next(s for s in record["starts"] if s["start"] == "homotopy")
+    assert stopped["status"] == "budget spent" and stopped["eps_reached"] < 1  # the case this test is about
+    save_figures(solution, tmp_path / "budget", ["homotopy"])
+    _clean(checked, {"budget/homotopy.png"})
+    fig = plot_homotopy(solution)
+    lines = {line.get_label(): np.asarray(line.get_xdata(), float) for line in fig.axes[0].get_lines()}
+    assert set(lines["cold (kept): J_ε of its converged steps"]) == {1.0}
+    # the default budget (1.5 × the cold solve's iterations) stops it at ε = 0.35 on this grid
+    reached = stopped["eps_reached"]
+    assert 0 < lines["homotopy: J_ε of its converged steps"].max() == pytest.approx(reached)
+    assert reached < lines["homotopy: stopped, iteration budget spent"].max() < 1.0  # where it stopped, not ε = 1
+    plt.close(fig)

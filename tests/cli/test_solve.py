@@ -256,3 +256,22 @@ def test_a_rerun_into_the_same_folder_leaves_no_earlier_figure(tmp_path, capsys)
     (out / "notes.txt").write_text("the user's own file")
     assert run_cli([*args, "--no-plot"], capsys)[0] == 0
     assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "solution.nc", "summary.json"]
+
+
+def test_homotopy_budget_option_lets_the_continuation_reach_one(tmp_path, capsys):
+    """--strategy homotopy is budgeted (1.5 × the cold solve's iterations): on the default example at K = 30
+    the continuation stops short of ε = 1 and the cold plan is kept. --homotopy-budget none lifts the budget:
+    the continuation alone runs, to ε = 1, at the cold solve's optimum (the same local optimum here; the cold
+    solve's J is the independent value, 1e-8 relative being the solves' tolerance, well above round-off)."""
+    base = ["solve", "hussein2008", "--intervals", "30", "--strategy", "homotopy", "--no-plot", "--quiet"]
+    code, _, stderr = run_cli([*base, "--out", str(tmp_path / "budgeted")], capsys)
+    budgeted = json.loads((tmp_path / "budgeted" / "summary.json").read_text())
+    assert code == 0 and "spent its budget" in stderr and budgeted["strategy"]["kept"] == "cold"
+    code, _, _ = run_cli([*base, "--homotopy-budget", "none", "--out", str(tmp_path / "free")], capsys)
+    free = json.loads((tmp_path / "free" / "summary.json").read_text())
+    assert code == 0 and {h["start"] for h in free["homotopy"]} == {"homotopy"}  # no cold solve
+    assert free["homotopy"][-1]["eps"] == 1.0 and free["eps_reached"] == 1.0
+    assert free["cost"] == pytest.approx(budgeted["cost"], rel=1e-8)
+    for bad in ("0", "-1", "1e9", "nan", "lots"):
+        code, _, stderr = run_cli([*base, "--homotopy-budget", bad, "--out", str(tmp_path / "bad")], capsys)
+        assert code == 2 and "--homotopy-budget" in stderr and not (tmp_path / "bad").exists()
