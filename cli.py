@@ -15,12 +15,13 @@ program ended by SIGPIPE).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import errno
 import importlib
 import os
 import signal
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import Any, NoReturn
 
 from . import __version__
@@ -46,12 +47,50 @@ def _command(name: str) -> Any:
 
 
 class _Parser(argparse.ArgumentParser):
-    """An argument parser whose errors are one line (exit status 2), like every other input error."""
+    """An argument parser whose errors are one line (exit status 2), like every other input error.
+
+    An option the command does not have is answered with the command's closest options and its own help
+    (argparse reports it from the top-level parser: ``mobisense: error: unrecognized arguments: --stratgy``).
+    """
+
+    argv: Sequence[str] = ()
+
+    def parse_args(self, args: Sequence[str] | None = None, namespace: Any = None) -> Any:  # noqa: D102
+        self.argv = list(sys.argv[1:] if args is None else args)
+        return super().parse_args(args, namespace)
 
     def error(self, message: str) -> NoReturn:  # noqa: D102
         from .core.errors import one_line
 
-        self.exit(2, f"{self.prog}: error: {one_line(message, 400)} (see {self.prog} --help)\n")
+        prog = self.prog
+        if message.startswith("unrecognized arguments:"):
+            command = self._command_parser()
+            if command is not None:
+                prog, message = command.prog, message + _closest_options(command, self.argv)
+        self.exit(2, f"{prog}: error: {one_line(message, 400)} (see {prog} --help)\n")
+
+    def _command_parser(self) -> argparse.ArgumentParser | None:
+        """The parser of the sub-command named on the command line, if any."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                word = next((a for a in self.argv if not a.startswith("-")), None)
+                return action.choices.get(word) if word is not None else None
+        return None
+
+
+def _closest_options(parser: argparse.ArgumentParser, argv: Sequence[str]) -> str:
+    """``; did you mean --strategy?`` for each unknown ``--option`` of ``argv`` close to one of ``parser``'s."""
+    import difflib
+
+    known = [s for action in parser._actions for s in action.option_strings if s.startswith("--")]
+    hints = []
+    for word in argv:
+        name = word.split("=", 1)[0]
+        if name.startswith("--") and name not in known:
+            close = difflib.get_close_matches(name, known, n=2, cutoff=0.75)
+            if close:
+                hints.append(f"{name}: did you mean {' or '.join(close)}?")
+    return "; " + "; ".join(hints) if hints else ""
 
 
 def build_parser(commands: Sequence[str] | None = None) -> argparse.ArgumentParser:
@@ -165,7 +204,7 @@ def _main(argv: Sequence[str] | None, said: list[str]) -> int:
     from .core.netcdf import recorded_command  # needs neither pydantic nor numpy
 
     try:
-        with recorded_command(argv):  # the "history" of every netCDF file written
+        with recorded_command(argv), _notes():  # the "history" of every netCDF file written
             status = int(args.run(args) or 0)
             raise_if_interrupted()  # a signal that arrived in CasADi code and was not acted on before the end
             return status
@@ -181,6 +220,29 @@ def _main(argv: Sequence[str] | None, said: list[str]) -> int:
         np.seterr(**errors)
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+
+
+@contextlib.contextmanager
+def _notes() -> Iterator[None]:
+    """Print what the library says at level INFO of the ``mobisense`` logger as ``mobisense: note: …`` lines.
+
+    (e.g. that a missing ``x.yaml`` is read as the shipped example ``x``); only for the command's duration.
+    """
+    import logging
+
+    class Notes(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            _say(f"note: {record.getMessage()}")
+
+    logger, handler = logging.getLogger("mobisense"), Notes(logging.INFO)
+    level = logger.level
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
 
 
 def _interrupted(said: list[str]) -> int:

@@ -144,8 +144,12 @@ def default_memory_limit() -> int:
     return int(min(candidates)) if candidates else 4 * 2**30
 
 
-def add_budget_argument(parser: argparse.ArgumentParser) -> None:
-    """Add ``--max-memory SIZE`` and ``--max-time DURATION`` (the budget checked before any work) to a command."""
+def add_budget_argument(parser: argparse.ArgumentParser, time_limit: str | None = None) -> None:
+    """Add ``--max-memory SIZE`` and ``--max-time DURATION`` (the budget checked before any work) to a command.
+
+    ``time_limit`` names what does stop the command's solver while it runs (e.g. ``solver.time_limit in the
+    problem file``), said in the help of ``--max-time``; None for a command that has no such limit.
+    """
 
     def size(text: str) -> int:
         try:
@@ -172,7 +176,7 @@ def add_budget_argument(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="DURATION",
         help="refuse to start when a lower bound of the computing time exceeds DURATION (e.g. 6h; default 1h); "
-        "not a time limit: solver.time_limit in the problem file (sweep: --time-limit) stops Ipopt",
+        + ("not a time limit once started" if time_limit is None else f"not a time limit: {time_limit} stops Ipopt"),
     )
 
 

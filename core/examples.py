@@ -83,7 +83,8 @@ def resolve_input(path: str | Path) -> Path:
     """``path`` itself if it exists, else the shipped example of that name (``hussein2008[.yaml]``), else ``path``.
 
     Only a bare name (no folder) is looked up among the examples, so a missing ``dir/x.yaml`` is reported as
-    missing rather than silently replaced.
+    missing rather than silently replaced. A missing ``x.yaml`` that is read as the example ``x`` is said at
+    level INFO of the ``mobisense`` logger (the command line prints it as ``mobisense: note: …``).
     """
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"expected the path of a YAML file or the name of a shipped example, got {type(path).__name__}")
@@ -91,18 +92,42 @@ def resolve_input(path: str | Path) -> Path:
     if path.exists() or path.parent != Path("."):
         return path
     shipped = shipped_examples().get(path.name.removesuffix(".yaml").removesuffix(".yml"))
-    return shipped if shipped is not None and shipped.is_file() else path
+    if shipped is None or not shipped.is_file():
+        return path
+    if path.suffix:  # a file name, not the bare name the examples are run by: say which file is read
+        import logging
+
+        logging.getLogger("mobisense").info("%s is not in %s: reading the shipped example %s", path,
+                                            Path.cwd(), shipped)  # fmt: skip
+    return shipped
+
+
+#: entries of a folder looked at for a near-miss file name (a huge folder is not listed whole)
+MAX_SIBLINGS = 2000
 
 
 def example_hint(path: str | Path) -> str:
-    """For a missing input file: ``"; did you mean the shipped example 'NAME'? …"`` when its name is close to one.
+    """For a missing input file: a close file name beside it, or a shipped example's close name.
+
+    ``"; did you mean dir/NAME.yaml?"`` comes first (the user's own, maybe edited, copy), else
+    ``"; did you mean the shipped example 'NAME'? …"``.
 
     ``problems/hussein2008.yaml`` outside a clone, or a misspelled ``hussein2009``, point to the example that
     a bare name reads (:func:`resolve_input`); an empty string when no example's name is close.
     """
     import difflib
+    import itertools
 
-    stem = Path(path).name.removesuffix(".yaml").removesuffix(".yml")
+    path = Path(path)
+    try:  # a near miss beside it first: the user's own (maybe edited) copy, not the shipped original
+        entries = itertools.islice(path.parent.iterdir(), MAX_SIBLINGS)
+        siblings = [p.name for p in entries if p.suffix in (".yaml", ".yml")]
+    except OSError:
+        siblings = []
+    close = difflib.get_close_matches(path.name[:200], siblings, n=1, cutoff=0.8)
+    if close:
+        return f"; did you mean {path.parent / close[0]}?"
+    stem = path.name.removesuffix(".yaml").removesuffix(".yml")
     close = difflib.get_close_matches(stem[:200], [e.name for e in EXAMPLES], n=1, cutoff=0.8)
     if not close:
         return ""

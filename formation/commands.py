@@ -65,7 +65,7 @@ class ReplayCommand:
             "--animate", action="store_true", help="also write replay.mp4 (or .gif) of a field replay"
         )
         parser.add_argument("--quiet", action="store_true", help="no progress bar or summary lines (as solve)")
-        add_budget_argument(parser)
+        add_budget_argument(parser, "solver.time_limit in a plan's problem file (when its plan is solved again)")
 
     @staticmethod
     def run(args: argparse.Namespace) -> int:

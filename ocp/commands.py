@@ -88,7 +88,7 @@ class SolveCommand:
             "random feasible trajectories solved at ε = 1) on dask workers and keep the best",
         )
         add_cluster_arguments(parser, "--multistart")
-        add_budget_argument(parser)
+        add_budget_argument(parser, "solver.time_limit in the problem file")
 
     @staticmethod
     def run(args: argparse.Namespace) -> int:
@@ -126,10 +126,16 @@ def _solve(args: argparse.Namespace, figures: Any) -> int:
     if args.plot is not None:
         from .plots import figure_names
 
-        known = figure_names(problem.process.field is not None)
-        unknown = ", ".join(name for name in args.plot if name not in known)
-        if unknown:
-            raise ConfigError(f"{source}: --plot: no figure {unknown}; expected some of {', '.join(known)}")
+        field = problem.process.field is not None
+        known = figure_names(field)
+        unknown = ", ".join(repr(name) for name in args.plot if name not in known)
+        kind = "field problem" if field else "problem"
+        if unknown:  # the file decides which figures exist (a field's are others)
+            raise ConfigError(f"--plot: no figure {unknown} for the {kind} of {source}; expected some of "
+                              f"{', '.join(known)}")  # fmt: skip
+        if "continuation" in args.plot and problem.solver.method not in ("indirect", "both"):
+            raise ConfigError(f"--plot continuation: only the indirect method draws it (--method indirect or both); "
+                              f"{source} is solved by the {problem.solver.method} method")  # fmt: skip
     if args.sensitivities and problem.solver.method != "direct":
         raise ConfigError(f"{source}: --sensitivities: expected solver.method 'direct'")
     if args.multistart is not None:
@@ -310,7 +316,7 @@ class SweepCommand:
             help="wall-clock limit of each Ipopt solve of a task (sets solver.time_limit)",
         )
         parser.add_argument("--quiet", action="store_true", help="no progress display")
-        add_budget_argument(parser)
+        add_budget_argument(parser, "--time-limit (solver.time_limit of each task)")
         parser.add_argument("--no-plot", action="store_true", help="skip cost.png (the cost over the varied keys)")
 
     @staticmethod

@@ -137,6 +137,29 @@ def test_a_missing_file_named_like_a_shipped_example_points_to_it(tmp_path, caps
     assert not (tmp_path / "out").exists()
 
 
+def test_a_near_miss_beside_the_file_comes_before_the_shipped_example(tmp_path, capsys, monkeypatch):
+    """ex/husein2008.yaml beside the user's (maybe edited) ex/hussein2008.yaml pointed to the shipped example,
+    whose bare name then ran the unedited original."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "ex").mkdir()
+    (tmp_path / "ex" / "hussein2008.yaml").write_text(yaml.safe_dump(hussein2008()))
+    assert cli.main(["validate", "ex/husein2008.yaml"]) == 2
+    assert capsys.readouterr().err.strip() == "mobisense: error: ex/husein2008.yaml: file not found; did you mean " \
+        "ex/hussein2008.yaml?"  # fmt: skip
+
+
+def test_a_file_name_read_as_the_shipped_example_is_said(tmp_path, capsys, monkeypatch):
+    """A bare name runs the shipped example as documented; a missing hussein2008.yaml was also read as it, without
+    a word: now a note says which file is read."""
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["validate", "hussein2008"]) == 0
+    assert capsys.readouterr().err == ""
+    assert cli.main(["validate", "hussein2008.yaml"]) == 0
+    note = capsys.readouterr().err.strip().splitlines()
+    assert len(note) == 1 and note[0].startswith(f"mobisense: note: hussein2008.yaml is not in {tmp_path}: reading")
+    assert note[0].endswith("problems/hussein2008.yaml")
+
+
 def test_the_api_loaders_take_example_names_and_tell_scenario_kinds_by_shape():
     from mobisense import design_formation, load_scenario
 

@@ -232,8 +232,10 @@ def test_plot_writes_only_the_figures_asked_for(tmp_path, capsys):
 @pytest.mark.parametrize(
     ("option", "expected"),
     [
-        (["--plot", "paths,maps"], "--plot: no figure maps; expected some of paths, covariance, controls"),
-        (["--plot", "variance_maps"], "--plot: no figure variance_maps"),  # a field problem's figure
+        (["--plot", "paths,maps"], "--plot: no figure 'maps' for the problem of "),
+        (["--plot", "path"], "expected some of paths, covariance, controls"),
+        (["--plot", "variance_maps"], "--plot: no figure 'variance_maps'"),  # a field problem's figure
+        (["--plot", "continuation"], "--plot continuation: only the indirect method draws it"),  # wrote nothing
         (["--plot", ","], "expected a comma list of figure names"),
         (["--plot", "paths", "--no-plot"], "not allowed with argument"),
     ],
@@ -275,3 +277,14 @@ def test_homotopy_budget_option_lets_the_continuation_reach_one(tmp_path, capsys
     for bad in ("0", "-1", "1e9", "nan", "lots"):
         code, _, stderr = run_cli([*base, "--homotopy-budget", bad, "--out", str(tmp_path / "bad")], capsys)
         assert code == 2 and "--homotopy-budget" in stderr and not (tmp_path / "bad").exists()
+
+
+def test_a_mistyped_option_is_named_with_the_closest_ones_and_the_commands_help(capsys):
+    """argparse reports an unknown option from the top-level parser ("mobisense: error: unrecognized arguments:
+    --stratgy cold (see mobisense --help)"), with no hint; the command's own closest options are named now."""
+    code, _, stderr = run_cli(["solve", "hussein2008", "--stratgy", "cold"], capsys)
+    assert code == 2 and len(stderr.strip().splitlines()) == 1
+    assert stderr.startswith("mobisense solve: error: unrecognized arguments: --stratgy cold")
+    assert "did you mean --strategy?" in stderr and "(see mobisense solve --help)" in stderr
+    code, _, stderr = run_cli(["validate", "hussein2008", "--zzz"], capsys)  # nothing close: no guess
+    assert code == 2 and "did you mean" not in stderr and "(see mobisense validate --help)" in stderr
