@@ -224,15 +224,16 @@ def _main(argv: Sequence[str] | None, said: list[str]) -> int:
 
 @contextlib.contextmanager
 def _notes() -> Iterator[None]:
-    """Print what the library says at level INFO of the ``mobisense`` logger as ``mobisense: note: …`` lines.
+    """Print what the library says to the ``mobisense`` logger, for the command's duration.
 
-    (e.g. that a missing ``x.yaml`` is read as the shipped example ``x``); only for the command's duration.
+    INFO as ``mobisense: note: …`` (a missing ``x.yaml`` read as the shipped example ``x``), WARNING and above as
+    ``mobisense: warning: …`` (a scheduler reached unencrypted).
     """
     import logging
 
     class Notes(logging.Handler):
         def emit(self, record: logging.LogRecord) -> None:
-            _say(f"note: {record.getMessage()}")
+            _say(f"{'warning' if record.levelno >= logging.WARNING else 'note'}: {record.getMessage()}")
 
     logger, handler = logging.getLogger("mobisense"), Notes(logging.INFO)
     level = logger.level

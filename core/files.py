@@ -120,15 +120,19 @@ def write_figure(path: str | Path, draw: Callable[[], Any]) -> None:
     """Call ``draw()`` (returning a matplotlib Figure), save it atomically and close it.
 
     A figure with constrained layout (``layout="constrained"``) is saved at its own size, drawn once; any
-    other is cropped to its contents (``bbox_inches="tight"``, which draws it twice).
+    other is cropped to its contents (``bbox_inches="tight"``, which draws it twice). A character of a label
+    that the font lacks (a sensor named in CJK script) is drawn as a box, without matplotlib's warning.
     """
+    import warnings
+
     import matplotlib.pyplot as plt
     from matplotlib.layout_engine import ConstrainedLayoutEngine
 
     fig = draw()
     try:
         tight = None if isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine) else "tight"
-        with atomic_path(path) as tmp:
+        with atomic_path(path) as tmp, warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="Glyph .* missing from font", category=UserWarning)
             fig.savefig(tmp, format=Path(path).suffix.lstrip(".") or "png", dpi=130, bbox_inches=tight)
     finally:
         plt.close(fig)

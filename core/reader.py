@@ -1,11 +1,13 @@
-"""The one reader of every input file: bounded, strict, and one-line errors naming the key path.
+r"""The one reader of every input file: bounded, strict, and one-line errors naming the key path.
 
 :func:`read_document` reads a YAML (or JSON) file into plain Python data — dicts with string keys, lists,
 ``str``, ``int``, ``float``, ``bool``, ``None`` — or raises :class:`~mobisense.core.errors.ConfigError`:
 
-- **size**: at most :data:`MAX_BYTES` bytes; directories, missing and unreadable files are refused;
+- **size**: at most :data:`~mobisense.core.input_text.MAX_BYTES` bytes; directories, missing and unreadable
+  files are refused (:mod:`mobisense.core.input_text`);
 - **encoding**: UTF-8 (a UTF-8 BOM is dropped); UTF-16 and UTF-32 with a BOM are decoded; anything else —
-  other encodings, binary data, NUL bytes — is refused, naming the offending byte's line;
+  other encodings, binary data, NUL bytes — is refused, naming the offending byte's line; a NUL character put
+  into a string or key by an escape (``"\0"``, ``"\u0000"``) is refused, naming its key path;
 - **structure**: the composer counts nodes *with aliases expanded* (:data:`MAX_NODES`) and bounds nesting
   (:data:`MAX_DEPTH`) while it composes, before any Python object exists, so a 200-byte alias bomb or
   50 000 nested ``[`` cost microseconds; recursive aliases are refused;
@@ -21,13 +23,8 @@ Errors read ``FILE: key.path: what (line L, column C)``. The events come from li
 
 from __future__ import annotations
 
-import codecs
 import json
-import os
 import re
-import select
-import stat
-import time
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +35,7 @@ from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 from yaml.resolver import BaseResolver
 
 from .errors import ConfigError, brief
+from .input_text import decode_text, first_nul, read_bytes
 
 try:  # libyaml's event parser (the composer below stays in Python to count nodes)
     from yaml._yaml import CParser as _EventParser  # type: ignore[import-not-found]
@@ -46,25 +44,13 @@ try:  # libyaml's event parser (the composer below stays in Python to count node
 except ImportError:  # pragma: no cover - pure-Python PyYAML
     _C_EVENTS = False
 
-__all__ = ["MAX_BYTES", "MAX_NODES", "MAX_DEPTH", "PIPE_TIMEOUT", "read_document", "parse_document", "read_bytes"]
+__all__ = ["MAX_NODES", "MAX_DEPTH", "read_document", "parse_document"]
 
-#: largest input file read (bytes); a problem with 150 states is ~0.5 MB
-MAX_BYTES = 8 * 1024 * 1024
 #: most nodes (scalars, lists, mappings) of a document, counted with every alias expanded
 MAX_NODES = 250_000
 #: deepest nesting of lists and mappings, aliases expanded (the schemas need < 10)
 MAX_DEPTH = 64
-#: longest wait (s) for a pipe or device given as an input file to deliver all its data
-PIPE_TIMEOUT = 10.0
 _INT64 = 2**63 - 1
-
-_BOMS = (  # longest first: the UTF-32-LE BOM starts with the UTF-16-LE one
-    (codecs.BOM_UTF32_LE, "utf-32-le"),
-    (codecs.BOM_UTF32_BE, "utf-32-be"),
-    (codecs.BOM_UTF8, "utf-8"),
-    (codecs.BOM_UTF16_LE, "utf-16-le"),
-    (codecs.BOM_UTF16_BE, "utf-16-be"),
-)
 
 _STR, _INT, _FLOAT = "tag:yaml.org,2002:str", "tag:yaml.org,2002:int", "tag:yaml.org,2002:float"
 _BOOL, _NULL = "tag:yaml.org,2002:bool", "tag:yaml.org,2002:null"
@@ -88,88 +74,6 @@ def _key_path(parts: tuple[Any, ...], limit: int = 80) -> str:
 
 def _where(mark: Any) -> str:
     return "" if mark is None else f"line {mark.line + 1}, column {mark.column + 1}"
-
-
-# ---------------------------------------------------------------------------------------------- bytes
-def read_bytes(path: str | Path, limit: int = MAX_BYTES, what: str = "file") -> bytes:
-    """The bytes of an input file, refusing directories, missing files and files larger than ``limit``.
-
-    Non-regular files (pipes, ``/dev/…``) are read up to ``limit`` + 1 bytes, so ``/dev/zero`` is refused
-    as too large instead of filling the memory; a pipe with no writer reads as empty.
-    """
-    path = Path(path)
-    try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
-    except FileNotFoundError:
-        if path.is_symlink():
-            raise ConfigError(f"{path}: broken symbolic link") from None
-        from .examples import example_hint
-
-        raise ConfigError(f"{path}: file not found{example_hint(path)}") from None
-    except IsADirectoryError:
-        raise ConfigError(f"{path}: is a directory, expected a {what}") from None
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read ({exc.strerror})") from None
-    try:
-        info = os.fstat(fd)
-        if stat.S_ISDIR(info.st_mode):
-            raise ConfigError(f"{path}: is a directory, expected a {what}")
-        if stat.S_ISREG(info.st_mode) and info.st_size > limit:
-            raise ConfigError(
-                f"{path}: {info.st_size / 2**20:.1f} MiB is larger than the {limit / 2**20:g} MiB an input {what} "
-                "may have"
-            )
-        os.set_blocking(fd, stat.S_ISREG(info.st_mode))  # a pipe or device: read without blocking, waits bounded
-        deadline = time.monotonic() + PIPE_TIMEOUT
-        chunks, size = [], 0
-        while size <= limit:
-            try:
-                chunk = os.read(fd, min(1 << 20, limit + 1 - size))
-            except BlockingIOError:  # a writer that has sent nothing yet, or not everything
-                if not select.select([fd], [], [], max(0.0, deadline - time.monotonic()))[0]:
-                    raise ConfigError(f"{path}: no end of the data within {PIPE_TIMEOUT:g} s (a pipe or device "
-                                      "whose writer does not finish); expected a file") from None  # fmt: skip
-                continue
-            if not chunk:
-                break
-            chunks.append(chunk)
-            size += len(chunk)
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read ({exc.strerror})") from None
-    finally:
-        os.close(fd)
-    data = b"".join(chunks)
-    if len(data) > limit:
-        raise ConfigError(f"{path}: larger than the {limit / 2**20:g} MiB an input {what} may have")
-    return data
-
-
-def _decode(data: bytes, path: Path) -> str:
-    """UTF-8 (or UTF-16/32 with a BOM) text of ``data``; ``ConfigError`` naming the first bad byte."""
-    for bom, encoding in _BOMS:
-        if data.startswith(bom):
-            try:
-                text = data[len(bom) :].decode(encoding)
-            except UnicodeDecodeError as exc:
-                raise ConfigError(
-                    f"{path}: starts with a {encoding.upper()} byte-order mark but is not valid {encoding.upper()} "
-                    f"(byte {exc.start}); save it as UTF-8"
-                ) from None
-            break
-    else:
-        try:
-            text = data.decode("utf-8")
-        except UnicodeDecodeError as exc:
-            line = data.count(b"\n", 0, exc.start) + 1
-            raise ConfigError(
-                f"{path}: line {line}: not UTF-8 text (byte 0x{data[exc.start]:02x} at offset {exc.start}); "
-                "save the file as UTF-8"
-            ) from None
-    nul = text.find("\x00")
-    if nul >= 0:
-        line = text.count("\n", 0, nul) + 1
-        raise ConfigError(f"{path}: line {line}: binary data (a NUL character), expected a text file")
-    return text
 
 
 # ----------------------------------------------------------------------------------------- YAML: scalars
@@ -459,7 +363,11 @@ def parse_document(text: str, source: str = "<text>", json_syntax: bool = False)
         ``SOURCE: key.path: problem (line L, column C)``.
     """
     try:
-        return _load_json(text) if json_syntax else _load_yaml(text)
+        data = _load_json(text) if json_syntax else _load_yaml(text)
+        nul = first_nul(data)  # an escape "\0" or "\u0000" in a string (raw NUL bytes are refused as binary)
+        if nul is not None:
+            raise _DocumentError(*nul)
+        return data
     except _DocumentError as exc:
         path = _key_path(exc.path)
         where = _where(exc.mark)
@@ -496,5 +404,5 @@ def read_document(path: str | Path) -> Any:
         One line naming the file, the key path where known, what is wrong and where.
     """
     path = Path(path)
-    text = _decode(read_bytes(path), path)
+    text = decode_text(read_bytes(path), path)
     return parse_document(text, str(path), json_syntax=path.suffix.lower() == ".json")

@@ -3,19 +3,18 @@
 ``--workers N`` local processes (N ≥ 1), or ``--scheduler ADDRESS`` of a running dask scheduler with dask's TLS
 settings (``--tls-ca-file``, ``--tls-cert``, ``--tls-key``: :class:`distributed.security.Security` with
 encryption required). dask exchanges pickled data, so a scheduler reached over plain ``tcp://`` on another
-host can run code in the client: :meth:`Cluster.from_args` warns about it. Imports nothing heavy.
+host can run code in the client: :func:`insecure_warning` says so once it has answered. Imports nothing heavy.
 """
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from ...core.errors import ConfigError
 
-__all__ = ["CONNECT_TIMEOUT", "Cluster", "add_cluster_arguments", "positive_int"]
+__all__ = ["CONNECT_TIMEOUT", "Cluster", "add_cluster_arguments", "insecure_warning", "positive_int"]
 
 #: seconds to connect to a ``--scheduler`` before giving up (exit status 2)
 CONNECT_TIMEOUT = 10.0
@@ -71,11 +70,13 @@ class Cluster:
         if args.workers is not None:
             raise ConfigError("--workers: local workers are not used with --scheduler (the cluster has its own)")
         scheme, sep, rest = scheduler.partition("://")
+        if not rest.strip():
+            raise ConfigError(f"--scheduler {scheduler[:80]!r}: expected the address of a dask scheduler "
+                              "(tls://host:port), got none")  # fmt: skip
         if not sep:
             scheme, rest = ("tls" if given else "tcp"), scheduler
         if scheme not in ("tcp", "tls", "inproc", "ucx", "ws", "wss"):
             raise ConfigError(f"--scheduler {scheduler[:80]}: unknown protocol {scheme!r} (tls://host:port or tcp://…)")
-        host = rest.rsplit(":", 1)[0] if ":" in rest else rest
         if given and scheme not in ("tls", "wss"):
             raise ConfigError(f"--scheduler {scheduler[:80]}: the --tls-* options need a tls:// address")
         security = None
@@ -88,11 +89,19 @@ class Cluster:
                 tls_client_key=str(args.tls_key) if args.tls_key else None,
                 require_encryption=True,
             )
-        elif scheme in ("tcp", "ws") and not host.startswith(_LOOPBACK):
-            print(
-                f"mobisense: warning: --scheduler {scheduler[:80]} is not encrypted: dask exchanges pickled data, "
-                "so whoever controls or intercepts that scheduler can run code in this process; use tls:// "
-                "with --tls-ca-file/--tls-cert/--tls-key",
-                file=sys.stderr,
-            )
         return cls(scheduler=f"{scheme}://{rest}", security=security)
+
+
+def insecure_warning(address: str, security: Any = None) -> str | None:
+    """The warning for a scheduler reached unencrypted on another host (None for tls://, loopback or TLS settings).
+
+    Said once the scheduler has answered (:func:`mobisense.ocp.batch.engine.open_client`): an address that is
+    refused gets its error alone.
+    """
+    scheme, _, rest = address.partition("://")
+    host = rest.rsplit(":", 1)[0] if ":" in rest else rest
+    if security is not None or scheme not in ("tcp", "ws") or host.startswith(_LOOPBACK):
+        return None
+    return (f"--scheduler {address[:80]} is not encrypted: dask exchanges pickled data, so whoever controls or "
+            "intercepts that scheduler can run code in this process; use tls:// with --tls-ca-file/--tls-cert/"
+            "--tls-key")  # fmt: skip

@@ -22,7 +22,7 @@ import numpy as np
 from ...core.errors import ConfigError
 from ...core.interrupts import deferred_interrupts
 from .chains import ChainLinks, best_seed, pair_chains, ring_order, solve_chain_link
-from .cluster import CONNECT_TIMEOUT
+from .cluster import CONNECT_TIMEOUT, insecure_warning
 from .worker import shareable_starts, solve_start_share, solve_task, task_problem
 
 __all__ = ["open_client", "run_tasks", "CHAIN_AHEAD"]
@@ -68,6 +68,11 @@ def open_client(scheduler: str | None, workers: int | None, security: Any = None
                 f"--scheduler {scheduler[:80]}: cannot connect within {CONNECT_TIMEOUT:g} s ({reason}); check the "
                 "address, or leave out --scheduler to use local workers"
             ) from None
+        warning = insecure_warning(scheduler, security)
+        if warning:
+            import logging
+
+            logging.getLogger("mobisense").warning(warning)
         with client:
             deferred.check()
             yield client

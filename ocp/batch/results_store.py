@@ -51,13 +51,20 @@ def _number(x: Any) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
 
+def _finite(x: Any) -> bool:
+    try:
+        return math.isfinite(x)
+    except OverflowError:  # an integer beyond the largest double
+        return False
+
+
 def value_kind(values: list[Any]) -> str:
     """How a varied key's values are stored: ``int64``, ``float64``, ``string``, ``list`` (of float64) or ``json``."""
     if values and all(isinstance(x, str) for x in values):
         return "string"
     if values and all(isinstance(x, int) and not isinstance(x, bool) for x in values):
         return "int64" if all(abs(x) < 2**63 for x in values) else "json"
-    if values and all(_number(x) and math.isfinite(x) for x in values):
+    if values and all(_number(x) and _finite(x) for x in values):
         return "float64"
     if values and all(isinstance(x, list) and all(_number(y) for y in x) for x in values):
         return "list"
@@ -154,8 +161,14 @@ class ResultStore:
     def _encode(self, row: dict[str, Any]) -> dict[str, Any]:
         out = dict(row)
         for key, kind in self.kinds.items():
-            if kind == "json" and key in out:
+            if key not in out:
+                continue
+            if kind == "json":
                 out[key] = json.dumps(out[key], sort_keys=True)
+            elif kind == "float64" and out[key] is not None:  # an integer among floats, beyond 2^53 too: the
+                out[key] = float(out[key])  # double the problem itself was given (pyarrow refuses it inexact)
+            elif kind == "list" and out[key] is not None:
+                out[key] = [float(y) for y in out[key]]
         return out
 
     def _decode(self, row: dict[str, Any]) -> dict[str, Any]:

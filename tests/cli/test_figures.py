@@ -160,3 +160,24 @@ def test_homotopy_figure_keeps_each_start_on_its_own_line(checked, tmp_path):
     assert 0 < lines["homotopy: J_ε of its converged steps"].max() == pytest.approx(reached)
     assert reached < lines["homotopy: stopped, iteration budget spent"].max() < 1.0  # where it stopped, not ε = 1
     plt.close(fig)
+
+
+def test_a_label_in_a_script_the_font_lacks_saves_without_a_warning(tmp_path):
+    """A sweep over sensors[0].name: ["名前"] printed matplotlib's "Glyph … missing from font(s)" UserWarning
+    (two lines per character) while cost.png was saved; the glyphs are drawn as boxes, silently."""
+    import warnings
+
+    from mobisense.core.files import write_figure
+
+    def draw():  # noqa: ANN202
+        fig, ax = plt.subplots()
+        ax.plot([0, 1], [0, 1], label="名前")
+        ax.legend()
+        ax.set_xlabel("x")
+        return fig
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        write_figure(tmp_path / "cjk.png", draw)
+    assert (tmp_path / "cjk.png").stat().st_size > 0
+    assert not [w for w in caught if "Glyph" in str(w.message)]

@@ -123,9 +123,9 @@ def test_a_pipe_whose_writer_never_finishes_is_refused_in_bounded_time(tmp_path,
     import os
     import threading
 
-    import mobisense.core.reader as reader
+    import mobisense.core.input_text as input_text
 
-    monkeypatch.setattr(reader, "PIPE_TIMEOUT", 0.3)
+    monkeypatch.setattr(input_text, "PIPE_TIMEOUT", 0.3)
     fifo = tmp_path / "f.yaml"
     os.mkfifo(fifo)
     opened = threading.Event()
@@ -202,3 +202,17 @@ def test_union_tags_are_not_key_paths():
 
     loc = ("reference", "constant", "bearing")
     assert format_location(loc, LeaderFollowerScenario) == "reference.bearing"
+
+
+def test_a_nul_escape_in_a_string_or_key_is_refused_where_it_is():
+    """The reader refused NUL bytes in the file but not the escapes "\\0", "\\x00", "\\u0000" inside quoted
+    strings: a leader-follower or distributed file named "a\\0b" validated, ran the whole simulation, then failed
+    writing its results (HDF5 strings cannot hold NUL), exit 1 instead of 2. YAML and JSON alike."""
+    for escape in ("\\0", "\\x00", "\\u0000"):
+        message = refused(f'name: "a{escape}b"\nduration: 1\n')
+        assert message == "f.yaml: name: a NUL character in 'a\u2400b'; expected text without it"
+        message = refused(f'runs:\n  - {{"x{escape}": 1}}\n')
+        assert message == "f.yaml: runs[0]: a NUL character in a key; expected a name without it"
+    with pytest.raises(ConfigError, match=r"f.json: vary.names\[1\]: a NUL character"):
+        parse_document('{"vary": {"names": ["a", "b\\u0000"]}}', "f.json", json_syntax=True)
+    assert parse('name: "a\\tb"\n') == {"name": "a\tb"}  # other escapes are text as before

@@ -97,13 +97,17 @@ def test_scheduler_that_accepts_and_never_answers(tmp_path):
         listener.close()
 
 
-def test_non_local_scheduler_without_tls_warns(tmp_path):
+def test_non_local_scheduler_that_does_not_answer_is_one_line(tmp_path):
     path = _write(tmp_path, {"cost.alpha": [0.1]})
     out = tmp_path / "out"
-    # a documentation address (RFC 5737) that does not answer: the warning comes first, then exit 2
+    # a documentation address (RFC 5737) that does not answer: exit 2 with the error alone (the warning about
+    # plain tcp:// came first, a second line for a refusal; it is said once the scheduler has answered)
     outcome = attack("sweep", _args(path, out, "--scheduler", "tcp://192.0.2.1:8786"), tmp_path, 2,
-                     ("not encrypted", "--tls-ca-file", "cannot connect"), out, limit=60)  # fmt: skip
+                     ("cannot connect",), out, limit=60)  # fmt: skip
     assert outcome.verdict in GOOD, outcome.problems
+    assert len(outcome.lines) == 1 and "not encrypted" not in outcome.stderr
+    empty = attack("sweep", _args(path, out, "--scheduler", ""), tmp_path, 2, ("expected the address",), out)
+    assert empty.verdict in GOOD and len(empty.lines) == 1, empty.problems
 
 
 @pytest.fixture()

@@ -301,3 +301,42 @@ def test_a_sweep_with_a_task_not_solved_exits_1_and_keeps_every_row(tmp_path, ca
     )
     rows = pd.read_parquet(out / "results.parquet").sort_values("index")
     assert list(rows["status"]) == ["failed", "solved"]
+
+
+def test_results_store_keeps_integers_beyond_two_to_the_53_among_floats(tmp_path):
+    """A varied value 9007199254740993 (2^53 + 1) among floats: pyarrow refused to store it in the float64 column
+    (ArrowInvalid, an internal error after the first part file was written). It is stored as the double the
+    problem itself was given, 2^53 exactly, and an integer beyond the largest double is no number column."""
+    from mobisense.ocp.batch.results_store import ResultStore, value_kind
+
+    big = 2**53 + 1
+    kinds = {"cost.alpha": value_kind([big, 0.004]), "sensors[0].p0": value_kind([[big, 10.0], [1.5, 2.0]])}
+    assert kinds == {"cost.alpha": "float64", "sensors[0].p0": "list"}
+    assert value_kind([10**400, 0.5]) == "json"  # not a double: kept exactly, as JSON text
+    store = ResultStore(tmp_path, kinds)
+    base = {"task": "t0", "index": 0, "status": "solved", "cost": 1.0}
+    store.append([{**base, "cost.alpha": big, "sensors[0].p0": [big, 10.0]}])
+    row = store.read()["t0"]
+    assert row["cost.alpha"] == float(big) == 2.0**53 and row["sensors[0].p0"] == [2.0**53, 10.0]
+
+
+def test_an_unencrypted_remote_scheduler_is_warned_about_once_it_answers(monkeypatch, caplog):
+    """The warning about plain tcp:// to another host used to be printed while the options were checked, so an
+    address that then failed to connect gave two lines; now open_client logs it after the scheduler answered."""
+    import logging
+
+    from dask.distributed import LocalCluster
+
+    from mobisense.ocp.batch import engine
+    from mobisense.ocp.batch.cluster import insecure_warning
+
+    assert insecure_warning("tcp://10.1.2.3:8786").startswith("--scheduler tcp://10.1.2.3:8786 is not encrypted")
+    for quiet in ("tls://10.1.2.3:8786", "tcp://127.0.0.1:8786", "tcp://localhost:8786", "inproc://x"):
+        assert insecure_warning(quiet) is None
+    assert insecure_warning("tcp://10.1.2.3:8786", security=object()) is None
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=None) as cluster:
+        monkeypatch.setattr(engine, "insecure_warning", lambda address, security=None: f"{address} is plain")
+        with caplog.at_level(logging.WARNING, logger="mobisense"), engine.open_client(cluster.scheduler_address, None):
+            pass
+    said = [r.getMessage() for r in caplog.records if r.name == "mobisense"]  # (dask logs its own)
+    assert said == [f"{cluster.scheduler_address} is plain"]
