@@ -164,9 +164,10 @@ def plot_homotopy(solution: Solution):  # noqa: ANN201
     import matplotlib.pyplot as plt
 
     steps = solution.homotopy
-    label = {"": solution.method}  # an indirect or shooting continuation has no start label
-    starts = list(dict.fromkeys(label.get(s.start, s.start) for s in steps))
-    by_start = {name: [s for s in steps if label.get(s.start, s.start) == name] for name in starts}
+    by_start: dict[str, list[Any]] = {}  # in the order the starts ran
+    for step in steps:  # an indirect or shooting continuation has no start label: the method names it
+        by_start.setdefault(step.start or solution.method, []).append(step)
+    starts = list(by_start)
     kept = (solution.stats.get("strategy") or {}).get("kept")
     iterations = "Newton iterations (BVP)" if solution.method == "indirect" else "Ipopt iterations"
     fig, ax = plt.subplots(figsize=(6.8, 4.2))

@@ -251,8 +251,8 @@ class DirectCollocation:
         """
         warm = lam_w0 is not None and lam_g0 is not None
         solver = self._solver(warm, max_iterations is not None)
-        if self._checked(max_iterations is not None) and self._limit is not None:
-            self._limit.reset(max_iterations)  # None: no budget, only the interrupt check
+        if self._limit is not None:  # the callback's budget for this solve (None: only the interrupt check)
+            self._limit.reset(max_iterations)
         lbw, ubw, lbg, ubg = self.bounds()
         args: dict[str, Any] = {"x0": w0, "p": P, "lbx": lbw, "ubx": ubw, "lbg": lbg, "ubg": ubg}
         if warm:
