@@ -86,6 +86,11 @@ def _describe(exc: BaseException) -> str:
     # CasADi errors end with the useful sentence after a long C++ stack of ".../file.cpp:123:" lines
     useful = [line for line in lines if ".cpp:" not in line and not line.startswith(("Error in", "at "))]
     text = (useful or lines or [type(exc).__name__])[-1]
+    if type(exc).__name__ == "LinAlgError":  # numpy.linalg's (without importing numpy): name the failure, not the type
+        return one_line(
+            f"linear algebra failed ({text}): a covariance or gain matrix is singular or not positive definite in "
+            "double precision; check that the noise levels and scales are not extreme"
+        )
     plain = isinstance(exc, RuntimeError) or type(exc).__name__ in text  # our own and CasADi's need no type
     return one_line(text if plain else f"{type(exc).__name__}: {text}")
 
