@@ -138,7 +138,7 @@ class PathConstraints(StrictModel):
         for k, zone in enumerate(zones if isinstance(zones, list) else []):
             expected = "a disc {center: [x, y], radius: r} or a convex polygon {polygon: [[x, y], …]}"
             if isinstance(zone, dict):
-                key = repr(sorted(zone.items()))
+                key = repr(sorted(_as_floats(zone).items()))  # radius 2 repeats radius 2.0
                 if key in seen:  # its rows would duplicate another's: a degenerate NLP (Ipopt stalls on it)
                     raise InvalidValue(f"keep_out[{k}]", f"repeats keep_out[{seen[key]}]; give each zone once")
                 seen[key] = k
@@ -151,6 +151,15 @@ class PathConstraints(StrictModel):
                 raise InvalidValue(f"keep_out[{k}].polygon", f"expected at most {MAX_POLYGON_VERTICES} vertices, "
                                    f"got {len(polygon)}")  # fmt: skip
         return data
+
+
+def _as_floats(value: Any) -> Any:
+    """``value`` with its integers (not booleans) as floats, in nested lists and mappings."""
+    if isinstance(value, dict):
+        return {k: _as_floats(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_as_floats(v) for v in value]
+    return float(value) if isinstance(value, int) and not isinstance(value, bool) else value
 
 
 # ---------------------------------------------------------------------- structure and parameters
@@ -377,6 +386,14 @@ def check_initial_state(constraints: PathConstraints, p0: list[list[float]], v0:
     p = np.asarray(p0, float)[None]
     v = np.asarray(v0, float)[None]
     for name, violation in margins(constraints, p, v).items():
+        if violation[0] > 0 and name == "min_separation":  # the closest pair: the later sensor, as for terminals
+            i, j = np.triu_indices(p.shape[1], 1)
+            k = int(np.argmin(np.linalg.norm(p[0, i] - p[0, j], axis=1)))
+            raise InvalidValue(
+                f"sensors[{j[k]}].p0",
+                f"expected an initial position at least constraints.min_separation {constraints.min_separation:g} "
+                f"from sensor {i[k]}'s, got {constraints.min_separation - violation[0]:g}",
+            )
         if violation[0] > 0:
             field = "v0" if name == "max_speed" else "p0"
             i = _offending_sensor(constraints, name, p[0], v[0])
@@ -416,8 +433,6 @@ def check_terminal_states(constraints: PathConstraints, terminals: list[tuple[An
 
 
 def _offending_sensor(constraints: PathConstraints, name: str, p: np.ndarray, v: np.ndarray) -> int:
-    if name == "min_separation":
-        return 0
     single = _without_separation(constraints)
     for i in range(p.shape[0]):
         if margins(single, p[None, i : i + 1], v[None, i : i + 1]).get(name, np.zeros(1))[0] > 0:
@@ -427,7 +442,7 @@ def _offending_sensor(constraints: PathConstraints, name: str, p: np.ndarray, v:
 
 def _without_separation(constraints: PathConstraints) -> PathConstraints:
     """The constraints of one sensor alone: ``min_separation`` dropped."""
-    return PathConstraints(**{**constraints.model_dump(), "min_separation": None})
+    return constraints.model_copy(update={"min_separation": None})  # validated already: not again
 
 
 def draw_constraints(ax: Any, constraints: PathConstraints | None) -> None:

@@ -8,6 +8,7 @@ import yaml
 from reference_problems import PROBLEMS
 
 from mobisense import cli
+from mobisense.core.errors import ConfigError
 from mobisense.ocp.direct.path_report import resimulate_sensors
 from mobisense.ocp.direct.solver import solve_direct
 from mobisense.ocp.path_constraints import PathConstraints, margins
@@ -92,6 +93,8 @@ def test_resimulation_is_exact_for_a_constant_control() -> None:
          "constraints.keep_out[0].polygon: expected at most 64 vertices, got 65"),
         ({"constraints": {"keep_out": [{"center": [6.5, 4.5], "radius": 2.0}] * 2}},
          "constraints.keep_out[1]: repeats keep_out[0]"),
+        ({"constraints": {"keep_out": [{"center": [6.5, 4.5], "radius": 2.0}, {"center": [6.5, 4.5], "radius": 2}]}},
+         "constraints.keep_out[1]: repeats keep_out[0]"),  # 2 and 2.0 are one radius (was reported as keep_out[1])
     ],
 )
 def test_bad_constraints_exit_2_with_the_key_path(tmp_path, capsys, edit, key) -> None:
@@ -108,6 +111,16 @@ def test_bad_constraints_exit_2_with_the_key_path(tmp_path, capsys, edit, key) -
     assert cli.main(["solve", str(path), "--out", str(out)]) == 2
     assert key in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_sensors_too_close_at_the_start_are_named_as_the_closest_pair() -> None:
+    data = base(constraints={"min_separation": 1.0})
+    sensor = data["sensors"][0]
+    data["sensors"] = [{**sensor, "name": name, "p0": p0} for name, p0 in
+                       (("a", [10.0, 10.0]), ("b", [-1.0, 11.0]), ("c", [-1.0, 10.5]))]  # fmt: skip
+    with pytest.raises(ConfigError, match=r"sensors\[2\]\.p0: expected an initial position at least "
+                       r"constraints\.min_separation 1 from sensor 1's, got 0\.5$"):  # fmt: skip
+        Problem.from_dict(data, source="p.yaml")
 
 
 @pytest.mark.slow
