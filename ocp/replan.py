@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from .model import SensorKalmanModel, Structure
+from .path_constraints import margins
 from .problem import Problem
 from .replan_window import Replanner, ReplanRecord
 
@@ -34,7 +35,7 @@ class Disturbance:
 
 @dataclass
 class FlightResult:
-    """One flight: times (T,), positions (T, N, 2), Σ (T, n, n), realised cost, plans made, re-solves.
+    """One flight: times (T,), positions and velocities (T, N, 2), Σ (T, n, n), realised cost, plans, re-solves.
 
     ``plans``: (instant, times (S,), positions (S, N, 2)) of each plan, sampled at ``PLAN_SAMPLES`` points.
     """
@@ -43,6 +44,7 @@ class FlightResult:
     p: np.ndarray
     Sigma: np.ndarray
     cost: float
+    v: np.ndarray | None = None
     plans: list[tuple[float, np.ndarray, np.ndarray]] = field(default_factory=list)
     records: list[ReplanRecord] = field(default_factory=list)
 
@@ -91,7 +93,8 @@ def fly(
     v = np.array([s.v0 for s in problem.sensors], float)
     Sigma = mats["Sigma0"].copy()
     drift = np.asarray(disturbance.drift, float)
-    result = FlightResult(np.empty(steps + 1), np.empty((steps + 1, N, 2)), np.empty((steps + 1, n, n)), 0.0)
+    shape = (steps + 1, N, 2)
+    result = FlightResult(np.empty(steps + 1), np.empty(shape), np.empty((steps + 1, n, n)), 0.0, np.empty(shape))
     result.plans.append(_plan_record(t0, plan))
     next_replan = t0 + every if every else np.inf
     running = 0.0
@@ -114,7 +117,7 @@ def fly(
 
     for j in range(steps + 1):
         t = t0 + j * dt
-        result.t[j], result.p[j], result.Sigma[j] = t, p, Sigma
+        result.t[j], result.p[j], result.v[j], result.Sigma[j] = t, p, v, Sigma  # type: ignore[index]
         if j == steps:
             break
         if replanner is not None and t >= next_replan - 1e-9 and tf - t > 2 * dt:
@@ -168,7 +171,10 @@ def replan_monte_carlo(
         ``closed_loop``, ``open_loop``, ``no_control``: ``{cost_mean, cost_std, cost_stderr}``;
         ``replan_solve_time_s``: ``{median, max}``; ``replan_iterations``: ``{median, max}``;
         ``replan_every_s``; ``horizon``; ``plan_cost`` (the full-horizon plan's optimal cost); ``flights``
-        (closed loop).
+        (closed loop); ``replan_relaxed`` (re-solves that relaxed a constraint the measured state violated) and
+        ``replan_relaxation_max`` (group -> largest such violation); with path constraints
+        ``flown_violation``: policy -> group -> the largest violation along the flown paths of all runs
+        (physical units, ≤ 0: held).
 
     The open loop flies the full-horizon plan whatever the horizon of the closed loop: it is what would be
     flown without re-planning, and for a receding horizon the benchmark the windows are measured against.
@@ -184,6 +190,7 @@ def replan_monte_carlo(
         if not solution.success:
             raise RuntimeError(f"{what} failed: {solution.message}")
     costs: dict[str, list[float]] = {"closed_loop": [], "open_loop": [], "no_control": []}
+    violations: dict[str, dict[str, float]] = {name: {} for name in costs}
     flights = []
     for r in range(runs):
         for name, kwargs in (
@@ -194,6 +201,9 @@ def replan_monte_carlo(
             rng = np.random.default_rng([seed, r])  # the same draws for the three policies
             flight = fly(problem, plan if name == "closed_loop" else full, disturbance, rng, time_step, **kwargs)
             costs[name].append(flight.cost)
+            if problem.constraints is not None:
+                for group, margin in margins(problem.constraints, flight.p, flight.v).items():
+                    violations[name][group] = max(violations[name].get(group, -np.inf), float(margin.max()))
             if name == "closed_loop":
                 flights.append(flight)
         if progress is not None:
@@ -214,6 +224,13 @@ def replan_monte_carlo(
         out[key] = {"median": float(np.median(values)), "max": float(np.max(values))} if values else {}
     out["replan_build_time_s"] = build_time
     out["replan_failures"] = sum(not x.success for x in records)
+    out["replan_relaxed"] = sum(bool(x.relaxed) for x in records)
+    out["replan_relaxation_max"] = {
+        group: max(x.relaxed[group] for x in records if group in x.relaxed)
+        for group in sorted({g for x in records for g in x.relaxed})
+    }
+    if problem.constraints is not None:
+        out["flown_violation"] = violations
     out["replan_every_s"] = every
     out["horizon"] = {"kind": "shrinking"} if length is None else {"kind": "receding", "length": length}
     out["warm_start"] = warm_start

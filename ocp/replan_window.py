@@ -14,6 +14,11 @@ transcription per interval count and starts each re-solve as ``warm_start`` says
     shrinks with it): the point is where the previous solution was in *its* time grid;
 ``cold``
     the coasting guess, no multipliers.
+
+A measured state may violate a path constraint that the plan kept (a current pushed a sensor into a zone,
+Euler's step overshot the speed limit by 1e-3): it is not bad input but the state to re-plan from. The window
+then relaxes each violated constraint just enough to hold it (:func:`relax_constraints`) and reports by how
+much; the next re-plan relaxes again from its own measured state, or not at all once the sensors are clear.
 """
 
 from __future__ import annotations
@@ -27,7 +32,15 @@ import numpy as np
 from .discretisation import discretise_process
 from .problem import Problem
 
-__all__ = ["WARM_STARTS", "cost_to_go_weight", "window_problem", "Replanner", "ReplanRecord"]
+__all__ = [
+    "WARM_STARTS",
+    "RELAXATION",
+    "cost_to_go_weight",
+    "relax_constraints",
+    "window_problem",
+    "Replanner",
+    "ReplanRecord",
+]
 
 WarmStart = Literal["shifted", "reused", "cold"]
 #: how a re-solve starts (see module docstring)
@@ -44,6 +57,66 @@ def cost_to_go_weight(A: np.ndarray, M: np.ndarray, K: np.ndarray, remaining: fl
     return 0.5 * (out + out.T)
 
 
+#: a relaxed constraint clears the measured state by this fraction of its own size (radius, d_min, v_max, extent)
+RELAXATION = 1e-3
+
+
+def relax_constraints(constraints: dict[str, Any], p: np.ndarray, v: np.ndarray) -> dict[str, float]:
+    """Loosen the violated constraints, in place, just enough to hold the state; their violations (physical units).
+
+    ``constraints`` is a normalised ``constraints`` dict, ``p`` and ``v`` the positions and velocities (N, 2).
+
+    A disc's radius shrinks to the nearest sensor's distance, a polygon shrinks about its vertices' mean
+    until every sensor is outside, ``min_separation`` drops to the closest pair's distance, ``max_speed``
+    rises to the fastest sensor's speed and the workspace grows to hold every sensor, each with a clearance
+    of :data:`RELAXATION` of its size. A zone whose centre a sensor sits on (nothing left to shrink to) is
+    dropped from the window.
+    """
+    from .path_constraints import PathConstraints, margins
+
+    violated = {
+        k: float(x[0]) for k, x in margins(PathConstraints(**constraints), p[None], v[None]).items() if x[0] > 0
+    }
+    zones = constraints.get("keep_out") or []
+    keep = [True] * len(zones)
+    for k, zone in enumerate(zones):
+        if f"keep_out[{k}]" not in violated:
+            continue
+        if "radius" in zone:
+            nearest = float(np.min(np.linalg.norm(p - np.asarray(zone["center"], float), axis=1)))
+            zone["radius"] = nearest * (1 - RELAXATION)
+            keep[k] = zone["radius"] > RELAXATION * (zone["radius"] + nearest)
+            continue
+        V = np.asarray(zone["polygon"], float)
+        centre = V.mean(axis=0)
+        one = {"keep_out": [{"polygon": V.tolist()}]}
+        low, high = 0.0, 1.0  # scale factors about the centre: sensors outside at `low`, inside at `high`
+        for _ in range(60):
+            mid = 0.5 * (low + high)
+            one["keep_out"][0]["polygon"] = (centre + mid * (V - centre)).tolist()
+            depth = margins(PathConstraints(**one), p[None], v[None])["keep_out[0]"][0]
+            low, high = (mid, high) if depth < 0 else (low, mid)
+        scale = low * (1 - RELAXATION)
+        zone["polygon"] = (centre + scale * (V - centre)).tolist()
+        keep[k] = scale > RELAXATION
+    if zones:
+        constraints["keep_out"] = [zone for zone, kept in zip(zones, keep, strict=True) if kept]
+    if "min_separation" in violated:
+        i, j = np.triu_indices(len(p), 1)
+        closest = float(np.min(np.linalg.norm(p[i] - p[j], axis=1)))
+        relaxed = closest * (1 - RELAXATION)
+        constraints["min_separation"] = relaxed if relaxed > RELAXATION * constraints["min_separation"] else None
+    if "max_speed" in violated:
+        constraints["max_speed"] = float(np.max(np.linalg.norm(v, axis=1))) * (1 + RELAXATION)
+    if "workspace" in violated:
+        w = constraints["workspace"]
+        for axis, name in enumerate(("x", "y")):
+            lo, hi = w[name]
+            clear = RELAXATION * (hi - lo)
+            w[name] = [min(lo, float(p[:, axis].min()) - clear), max(hi, float(p[:, axis].max()) + clear)]
+    return violated
+
+
 def window_problem(
     problem: Problem,
     t: float,
@@ -53,10 +126,12 @@ def window_problem(
     Sigma: np.ndarray,
     intervals: int,
     strategy: str | None = "cold",
+    relaxed: dict[str, float] | None = None,
 ) -> Problem:
     """``problem`` on ``[t, t_end]`` from positions ``p``, velocities ``v`` (N, 2), Σ (n, n), on ``intervals``.
 
-    ``strategy``: the solve strategy if the warm start fails (None: the problem's).
+    ``strategy``: the solve strategy if the warm start fails (None: the problem's). Constraints that the
+    measured state violates are relaxed (:func:`relax_constraints`); ``relaxed`` receives their violations.
     """
     data = problem.normalised()
     data["horizon"]["t0"], data["horizon"]["tf"] = float(t), float(t_end)
@@ -66,6 +141,10 @@ def window_problem(
         sensor["p0"], sensor["v0"] = p[i].tolist(), v[i].tolist()
         if t_end < tf:
             sensor["terminal"] = None
+    if data.get("constraints"):
+        violated = relax_constraints(data["constraints"], np.asarray(p, float), np.asarray(v, float))
+        if relaxed is not None:
+            relaxed.update(violated)
     if t_end < tf:
         m = problem.matrices()
         data["cost"]["M"] = cost_to_go_weight(m["A"], m["M"], m["K"], tf - t_end).tolist()
@@ -77,7 +156,10 @@ def window_problem(
 
 @dataclass
 class ReplanRecord:
-    """What one re-solve cost: instant (T), window end (T), intervals, Ipopt iterations, wall time (s), success."""
+    """What one re-solve cost: instant (T), window end (T), intervals, Ipopt iterations, wall time (s), success.
+
+    ``relaxed``: the constraints relaxed for it, group -> the measured state's violation (physical units).
+    """
 
     t: float
     t_end: float
@@ -85,6 +167,7 @@ class ReplanRecord:
     iterations: int
     time_s: float
     success: bool
+    relaxed: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -158,7 +241,8 @@ class Replanner:
         from .direct.warm_shift import shifted_point
 
         t_end, K = self.window(t)
-        sub = window_problem(self.problem, t, t_end, p, v, Sigma, K)
+        relaxed: dict[str, float] = {}
+        sub = window_problem(self.problem, t, t_end, p, v, Sigma, K, relaxed=relaxed)
         tr = self.transcription(sub)  # built before the flight by prepare(): not part of the re-solve time
         start = time.perf_counter()
         init: Any = None
@@ -170,5 +254,5 @@ class Replanner:
         new = solve_direct(sub, transcription=tr, init=init)
         elapsed = time.perf_counter() - start
         iterations = sum(step.iterations for step in new.homotopy)
-        self.records.append(ReplanRecord(t, t_end, K, iterations, elapsed, new.success))
+        self.records.append(ReplanRecord(t, t_end, K, iterations, elapsed, new.success, relaxed))
         return new

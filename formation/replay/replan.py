@@ -14,7 +14,8 @@ Example (``problems/replan_drift.yaml``)::
 ``mobisense replay FILE`` flies the closed loop (re-planned), the open loop (first plan) and no control
 with the same noise draws (:func:`mobisense.ocp.replan.replan_monte_carlo`) and writes ``summary.json``
 (``closed_loop``, ``open_loop``, ``no_control``: ``{cost_mean, cost_std, cost_stderr}``,
-``replan_solve_time_s``, ``replan_iterations``, ``replan_every_s``, ``horizon``), ``result.nc`` (the flown
+``replan_solve_time_s``, ``replan_iterations``, ``replan_every_s``, ``horizon``, ``replan_failures``,
+``replan_relaxed``, ``replan_relaxation_max`` and, with path constraints, ``flown_violation``), ``result.nc`` (the flown
 paths and Σ of every closed-loop run and the plans made along every run, ``run × plan × plan_node``) and
 ``replan.png`` (the plans of run 0 fanning out along its flown path).
 """
@@ -118,8 +119,10 @@ class ReplanResult(SimulationResult):
         print(
             f"  re-solves: median {1e3 * s['replan_solve_time_s']['median']:.1f} ms, max "
             f"{1e3 * s['replan_solve_time_s']['max']:.1f} ms, {s['replan_iterations']['median']:g} iterations "
-            f"(median); {s['replan_failures']} failed"
+            f"(median); {s['replan_failures']} failed{_relaxations(s)}"
         )
+        if "flown_violation" in s:
+            print(f"  flown paths: {_violations(s['flown_violation'])}")
         super().report(folder)
 
     def plot(self, folder: str | Path) -> list[Path]:
@@ -202,6 +205,25 @@ def run_replan(config: ReplanScenario, source: Path, seed: int | None = None) ->
     flights = r.pop("flights")
     summary = {"kind": "replan", "problem": problem.name, **r}
     return ReplanResult(_dataset(problem, flights), summary)
+
+
+def _relaxations(summary: dict[str, Any]) -> str:
+    """``"; 7 relaxed a constraint the measured state violated (keep_out[0] by up to 0.13)"``, or ``""``."""
+    count, largest = summary.get("replan_relaxed", 0), summary.get("replan_relaxation_max", {})
+    if not count:
+        return ""
+    groups = ", ".join(f"{group} by up to {value:.2g}" for group, value in largest.items())
+    return f"; {count} relaxed a constraint the measured state violated ({groups})"
+
+
+def _violations(flown: dict[str, dict[str, float]]) -> str:
+    """Each policy's largest constraint violations along its flown paths, or that it held them."""
+    parts = []
+    for policy, groups in flown.items():
+        broken = {g: v for g, v in groups.items() if v > 0}
+        text = ", ".join(f"{g} by {v:.2g}" for g, v in broken.items()) if broken else "held every constraint"
+        parts.append(f"{policy.replace('_', ' ')} {text}")
+    return "; ".join(parts)
 
 
 def _dataset(problem: Any, flights: list[Any]) -> Any:

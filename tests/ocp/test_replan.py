@@ -83,3 +83,53 @@ def test_receding_windows_without_disturbance_cost_more_than_the_full_plan_and_b
     drift = replan_monte_carlo(problem, Disturbance((0.3, -0.2), 0.05), runs=4, every=1.0, time_step=0.01, length=3.0)
     closed, open_ = drift["closed_loop"], drift["open_loop"]
     assert closed["cost_mean"] + closed["cost_stderr"] < open_["cost_mean"] - open_["cost_stderr"]
+
+
+def test_a_measured_state_that_violates_constraints_relaxes_each_just_enough_to_hold_it() -> None:
+    from mobisense.ocp.path_constraints import PathConstraints, margins
+    from mobisense.ocp.replan_window import RELAXATION, relax_constraints
+
+    square = [[4.0, 4.0], [6.0, 4.0], [6.0, 6.0], [4.0, 6.0]]
+    given = {"keep_out": [{"center": [0.0, 0.0], "radius": 1.0}, {"polygon": square},
+                          {"center": [20.0, 20.0], "radius": 1.0}],
+             "min_separation": 2.0, "max_speed": 1.0, "workspace": {"x": [-1.0, 10.0], "y": [-1.0, 10.0]}}  # fmt: skip
+    p = np.array([[0.6, 0.0], [4.5, 5.0], [4.5, 6.1], [11.0, -2.0]])  # in the disc, the square, apart 1.1; outside
+    v = np.array([[0.0, 1.2], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]])
+    before = margins(PathConstraints(**given), p[None], v[None])
+    relaxed = {**given, "keep_out": [dict(z) for z in given["keep_out"]], "workspace": dict(given["workspace"])}
+    violations = relax_constraints(relaxed, p, v)
+    assert violations == pytest.approx({k: float(x[0]) for k, x in before.items() if x[0] > 0}, rel=1e-15)
+    assert set(violations) == {"keep_out[0]", "keep_out[1]", "min_separation", "max_speed", "workspace"}
+    after = margins(PathConstraints(**relaxed), p[None], v[None])
+    assert all(x[0] < 0 for x in after.values())  # the measured state now holds every constraint …
+    # … by the clearance, and not more: radius 0.6, d_min 1.1, v_max 1.2 and the workspace's edges, scaled
+    assert relaxed["keep_out"][0]["radius"] == pytest.approx(0.6 * (1 - RELAXATION), rel=1e-12)
+    assert relaxed["min_separation"] == pytest.approx(1.1 * (1 - RELAXATION), rel=1e-12)
+    assert relaxed["max_speed"] == pytest.approx(1.2 * (1 + RELAXATION), rel=1e-12)
+    assert relaxed["workspace"]["x"] == pytest.approx([-1.0, 11.0 + 11 * RELAXATION])
+    assert relaxed["workspace"]["y"] == pytest.approx([-2.0 - 11 * RELAXATION, 10.0])
+    # the square shrinks about its centre (5, 5) until (4.5, 5) is outside: half-width 0.5
+    np.testing.assert_allclose(relaxed["keep_out"][1]["polygon"],
+                               [[5 + 0.5 * (1 - RELAXATION) * sx, 5 + 0.5 * (1 - RELAXATION) * sy]
+                                for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))], rtol=1e-12)  # fmt: skip
+    assert relaxed["keep_out"][2] == given["keep_out"][2]  # held: unchanged
+    on_centre = {"keep_out": [{"center": [0.0, 0.0], "radius": 1.0}]}  # nothing to shrink to: dropped
+    assert relax_constraints(on_centre, np.zeros((1, 2)), np.zeros((1, 2))) == {"keep_out[0]": 1.0}
+    assert on_centre["keep_out"] == []
+
+
+@pytest.mark.slow
+def test_re_planning_in_a_current_across_active_constraints_relaxes_instead_of_refusing_the_measured_state() -> None:
+    # the shipped keep-out example: its plan skirts a disc and a polygon and rides its speed limit, so the
+    # current pushes the flown sensor into the disc and Euler's step over the limit. The re-plans were refused
+    # as invalid input ("<re-plan>: sensors[0].p0: expected an initial state satisfying …", exit 2).
+    problem = Problem.from_dict(yaml.safe_load((PROBLEMS / "keep_out.yaml").read_text()))
+    r = replan_monte_carlo(problem, Disturbance((0.3, -0.2), 0.05), runs=2, every=0.5, time_step=0.01)
+    assert r["replan_failures"] == 0
+    assert r["replan_relaxed"] > 0 and r["replan_relaxation_max"]["keep_out[0]"] > 0
+    closed, open_ = r["flown_violation"]["closed_loop"], r["flown_violation"]["open_loop"]
+    # re-planning steers back out: measured 0.13 into the disc against the open loop's 0.97, 0.05 into the
+    # polygon against 0.96: at most 0.3 of the open loop's depth is twice the disc's measured ratio (0.13)
+    for zone in ("keep_out[0]", "keep_out[1]"):
+        assert closed[zone] < 0.3 * open_[zone]
+    assert r["closed_loop"]["cost_mean"] < r["open_loop"]["cost_mean"]
