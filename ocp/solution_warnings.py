@@ -10,17 +10,24 @@ from typing import Any
 
 from .solve_outcome import StartKind
 
-__all__ = ["PLAN_TOLERANCE", "solution_warnings", "plan_warning", "strategy_warning", "init_warning"]
+__all__ = ["PLAN_TOLERANCE", "PATH_TOLERANCE", "solution_warnings", "plan_warning", "constraint_warning",
+           "strategy_warning", "init_warning"]  # fmt: skip
 
 #: relative difference of the optimiser's J from its plan re-integrated (``stats["plan_check"]``) above which the
 #: grid is reported as not resolving the plan (the discretisation error of a resolved grid is far smaller:
 #: 5e-11 on the default problem at K = 100, 2.2e-7 on coupled_two_sensor at its K = 50)
 PLAN_TOLERANCE = 1e-5
+#: violation of a path constraint on the re-simulated path (between the nodes), relative to the constraint's size
+#: (a disc's radius, a polygon's √area, d_min, v_max, the workspace's shorter side, u_max), beyond which the plan
+#: is reported as breaking it: a resolved grid leaves far less (keep_out.yaml at K = 80: 1e-4 of the radius)
+PATH_TOLERANCE = 1e-2
 
 
 def solution_warnings(solution: Any, smallest: float) -> list[str]:
     """Every warning that applies to ``solution``, whose Σ(t) has smallest eigenvalue ``smallest``."""
-    warnings = [w for w in (plan_warning(solution), strategy_warning(solution), init_warning(solution)) if w]
+    candidates = (plan_warning(solution), constraint_warning(solution), strategy_warning(solution),
+                  init_warning(solution))  # fmt: skip
+    warnings = [w for w in candidates if w]
     if smallest <= 0:  # a covariance that is not one: the grid or the solve did not follow the Riccati flow
         warnings.append(f"Σ(t) is not positive definite (smallest eigenvalue {smallest:.3g}): not a Kalman "
                         "filter's covariance — the grid does not resolve it or the optimum is a poor one; try "
@@ -33,6 +40,62 @@ def solution_warnings(solution: Any, smallest: float) -> list[str]:
             f"J = {solution.baseline['cost']:.6g}): {why}"
         )
     return warnings
+
+
+def constraint_warning(solution: Any) -> str | None:
+    """Which path constraints the flown plan breaks beyond :data:`PATH_TOLERANCE` of their size, or None.
+
+    The NLP holds the constraints at the collocation nodes; the re-simulated path between them
+    (``stats["constraints"]``, :func:`mobisense.ocp.direct.path_report.constraint_report`) may cross them when
+    the grid is too coarse near the constraint, or when no path can keep them (a start on a zone's edge,
+    heading in at the speed limit) and the optimiser has found the discretisation's way through instead.
+    """
+    report = solution.stats.get("constraints")
+    if not report:
+        return None
+    sizes = constraint_sizes(solution.problem)
+    broken = []
+    for group, entry in report.items():
+        size = sizes.get(group)
+        violation = entry.get("max_violation")
+        if size and violation is not None and violation > PATH_TOLERANCE * size:
+            broken.append(f"{group} by {violation:.3g} {entry.get('units', '')} ({100 * violation / size:.2g} % of its "
+                          f"size) at t = {entry['max_violation_time']:.4g} (at the nodes "
+                          f"{entry['max_violation_at_nodes']:.2g})")  # fmt: skip
+    if not broken:
+        return None
+    intervals = solution.collocation[2] if solution.collocation is not None else solution.stats.get("intervals")
+    return (
+        f"the plan's controls, flown, break {'; '.join(broken)}: the constraints hold at the collocation nodes "
+        f"only; solve on more than K = {intervals} intervals (--intervals), and if the violation does not shrink, "
+        "no path keeps the constraint from this start"
+    )
+
+
+def constraint_sizes(problem: Any) -> dict[str, float]:
+    """The size of each constraint group (physical units): :data:`PATH_TOLERANCE` is relative to it."""
+    import numpy as np
+
+    sizes: dict[str, float] = {}
+    c = problem.constraints
+    if c is not None:
+        for k, zone in enumerate(c.keep_out):
+            if hasattr(zone, "radius"):
+                sizes[f"keep_out[{k}]"] = float(zone.radius)
+            else:
+                V = np.asarray(zone.polygon, float)
+                area = 0.5 * abs(float(np.sum(V[:, 0] * np.roll(V[:, 1], -1) - np.roll(V[:, 0], -1) * V[:, 1])))
+                sizes[f"keep_out[{k}]"] = area**0.5
+        if c.min_separation is not None:
+            sizes["min_separation"] = float(c.min_separation)
+        if c.max_speed is not None:
+            sizes["max_speed"] = float(c.max_speed)
+        if c.workspace is not None:
+            sizes["workspace"] = float(min(c.workspace.x[1] - c.workspace.x[0], c.workspace.y[1] - c.workspace.y[0]))
+    bounds = [s.u_max for s in problem.sensors if s.u_max is not None]
+    if bounds:
+        sizes["u_max"] = float(min(bounds))
+    return sizes
 
 
 def plan_warning(solution: Any) -> str | None:

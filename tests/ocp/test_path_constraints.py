@@ -224,3 +224,21 @@ def test_a_baseline_that_crosses_a_zone_or_leaves_the_workspace_is_infeasible() 
     assert Problem.from_dict(data).coasting_violations() == crossing
     data["constraints"] = {"keep_out": [{"center": [13.0, 0.0], "radius": 1.0}]}  # 3 L beside the line: clear
     assert Problem.from_dict(data).coasting_violations() == []
+
+
+@pytest.mark.slow
+def test_a_plan_whose_flown_path_breaks_a_constraint_between_the_nodes_is_reported_so() -> None:
+    # a start on a disc's edge heading to its centre at the speed limit: no path stays out (it would need an
+    # infinite deceleration), yet the NLP, holding the disc at the nodes only, converges ("solved"); flown, its
+    # controls enter the disc by 3.4 cm at the first node (the audit's re-integration with scipy: 0.03398)
+    data = base(intervals=40, constraints={"keep_out": [{"center": [10.0, 8.5], "radius": 1.5}], "max_speed": 2.0})
+    data["solver"]["strategy"] = "cold"
+    solution = solve_direct(Problem.from_dict(data))
+    assert solution.success
+    entry = solution.stats["constraints"]["keep_out[0]"]
+    assert entry["max_violation_at_nodes"] < 1e-5 and entry["max_violation"] > 0.01 * 1.5
+    warning = solution.summary()["warning"]
+    assert "the plan's controls, flown, break keep_out[0] by" in warning and "K = 40 intervals" in warning
+    # the shipped example's flown path keeps its constraints within 1e-4 of their sizes: no warning
+    clear = solve_direct(Problem.from_dict(yaml.safe_load((PROBLEMS / "keep_out.yaml").read_text())))
+    assert "warning" not in clear.summary()
