@@ -39,6 +39,7 @@ __all__ = [
     "path_parameter_values",
     "path_rows",
     "margins",
+    "constraint_sizes",
     "group_names",
     "check_initial_state",
     "check_terminal_states",
@@ -366,6 +367,29 @@ def margins(constraints: PathConstraints, p: np.ndarray, v: np.ndarray) -> dict[
         outside = np.maximum.reduce([w.x[0] - p[..., 0], p[..., 0] - w.x[1], w.y[0] - p[..., 1], p[..., 1] - w.y[1]])
         out["workspace"] = outside.max(axis=1)
     return out
+
+
+def constraint_sizes(constraints: PathConstraints) -> dict[str, float]:
+    """The size of each group (physical units), which violations are judged relative to.
+
+    A disc's radius, a polygon's √area, d_min, v_max, the workspace's shorter side.
+    """
+    sizes: dict[str, float] = {}
+    for k, zone in enumerate(constraints.keep_out):
+        if isinstance(zone, KeepOutDisc):
+            sizes[f"keep_out[{k}]"] = float(zone.radius)
+        else:
+            V = np.asarray(zone.polygon, float)
+            area = 0.5 * abs(float(np.sum(V[:, 0] * np.roll(V[:, 1], -1) - np.roll(V[:, 0], -1) * V[:, 1])))
+            sizes[f"keep_out[{k}]"] = area**0.5
+    if constraints.min_separation is not None:
+        sizes["min_separation"] = float(constraints.min_separation)
+    if constraints.max_speed is not None:
+        sizes["max_speed"] = float(constraints.max_speed)
+    if constraints.workspace is not None:
+        w = constraints.workspace
+        sizes["workspace"] = float(min(w.x[1] - w.x[0], w.y[1] - w.y[0]))
+    return sizes
 
 
 def _closest_pairs(p: np.ndarray) -> np.ndarray:

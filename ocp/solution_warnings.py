@@ -53,7 +53,13 @@ def constraint_warning(solution: Any) -> str | None:
     report = solution.stats.get("constraints")
     if not report:
         return None
-    sizes = constraint_sizes(solution.problem)
+    from .path_constraints import constraint_sizes
+
+    problem = solution.problem
+    sizes = constraint_sizes(problem.constraints) if problem.constraints is not None else {}
+    bounds = [s.u_max for s in problem.sensors if s.u_max is not None]
+    if bounds:
+        sizes["u_max"] = float(min(bounds))
     broken = []
     for group, entry in report.items():
         size = sizes.get(group)
@@ -70,32 +76,6 @@ def constraint_warning(solution: Any) -> str | None:
         f"only; solve on more than K = {intervals} intervals (--intervals), and if the violation does not shrink, "
         "no path keeps the constraint from this start"
     )
-
-
-def constraint_sizes(problem: Any) -> dict[str, float]:
-    """The size of each constraint group (physical units): :data:`PATH_TOLERANCE` is relative to it."""
-    import numpy as np
-
-    sizes: dict[str, float] = {}
-    c = problem.constraints
-    if c is not None:
-        for k, zone in enumerate(c.keep_out):
-            if hasattr(zone, "radius"):
-                sizes[f"keep_out[{k}]"] = float(zone.radius)
-            else:
-                V = np.asarray(zone.polygon, float)
-                area = 0.5 * abs(float(np.sum(V[:, 0] * np.roll(V[:, 1], -1) - np.roll(V[:, 0], -1) * V[:, 1])))
-                sizes[f"keep_out[{k}]"] = area**0.5
-        if c.min_separation is not None:
-            sizes["min_separation"] = float(c.min_separation)
-        if c.max_speed is not None:
-            sizes["max_speed"] = float(c.max_speed)
-        if c.workspace is not None:
-            sizes["workspace"] = float(min(c.workspace.x[1] - c.workspace.x[0], c.workspace.y[1] - c.workspace.y[0]))
-    bounds = [s.u_max for s in problem.sensors if s.u_max is not None]
-    if bounds:
-        sizes["u_max"] = float(min(bounds))
-    return sizes
 
 
 def plan_warning(solution: Any) -> str | None:
