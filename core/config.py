@@ -349,6 +349,12 @@ def _describe(error: dict[str, Any], model: type[BaseModel], suggestion_for: dic
     if message.startswith("Input should be "):
         message = "expected " + message[len("Input should be ") :]
     got = error.get("input")
+    if kind in ("too_long", "too_short"):  # "List should have at most 2 items after validation, not 3"
+        bound = (error.get("ctx") or {}).get("max_length" if kind == "too_long" else "min_length")
+        if bound is not None and isinstance(got, (list, tuple, str, dict)):
+            noun = "character" if isinstance(got, str) else "item"
+            most = "at most" if kind == "too_long" else "at least"
+            message = f"expected {most} {bound} {noun}{'s' if bound != 1 else ''}, not {len(got)}"
     got_text = "" if kind.startswith("value_error") or isinstance(got, dict) else f" ({_got(got)})"
     return f"{path}: {message}{got_text}"
 

@@ -84,6 +84,10 @@ def test_resimulation_is_exact_for_a_constant_control() -> None:
         ({"constraints": {"max_speed": 2.5}, "terminal": {"v": [3.0, 0.0]}},
          "sensors[0].terminal.v: expected a terminal speed within constraints.max_speed 2.5, got 3"),
         ({"constraints": {"workspace": {"x": [1, 0], "y": [0, 1]}}}, "constraints.workspace.x"),
+        ({"constraints": {"workspace": {"x": [-2, 5, 6], "y": [0, 1]}}},
+         "constraints.workspace.x: expected at most 2 items, not 3 (got [-2, 5, 6]"),  # was pydantic's own words
+        ({"constraints": {"workspace": {"x": [-2, 12], "y": [0]}}}, "constraints.workspace.y: expected at least 2 "
+                                                                   "items, not 1"),
         ({"constraints": {"max_speed": 3.0}, "solver": {"method": "indirect"}}, "constraints"),
         # hostile sizes and repeats (a fuzzer's: 2000 copies of a disc through a YAML anchor ran for minutes)
         ({"constraints": {"keep_out": [{"center": [50.0 + k, 50.0], "radius": 0.1} for k in range(101)]}},
