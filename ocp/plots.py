@@ -47,6 +47,22 @@ def effective_noise(solution: Solution, sensor: int, points: np.ndarray) -> np.n
     return 1.0 / np.asarray(f(points.T)).ravel()
 
 
+def _constraint_corners(problem: Any) -> np.ndarray:
+    """Points (M, 2) that the drawn zones and workspace reach: the shaded plane covers them."""
+    c = problem.constraints
+    if c is None:
+        return np.zeros((0, 2))
+    points = []
+    for zone in c.keep_out:
+        if hasattr(zone, "radius"):
+            points += [np.asarray(zone.center) + zone.radius * np.array(d) for d in ((-1, -1), (1, 1))]
+        else:
+            points += [np.asarray(v, float) for v in zone.polygon]
+    if c.workspace is not None:
+        points += [np.array([c.workspace.x[0], c.workspace.y[0]]), np.array([c.workspace.x[1], c.workspace.y[1]])]
+    return np.array(points, float).reshape(-1, 2)
+
+
 def _label(solution: Solution, **powers: int) -> str:
     return solution.problem.units.system().label(**powers)
 
@@ -59,7 +75,7 @@ def plot_paths(solution: Solution):  # noqa: ANN201  (matplotlib Figure)
     problem = solution.problem
     length = _label(solution, length=1)
     locs = problem.matrices()["locations"]
-    pts = np.concatenate([solution.p.reshape(-1, 2), locs])
+    pts = np.concatenate([solution.p.reshape(-1, 2), locs, _constraint_corners(problem)])
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     pad = 0.15 * max(float((hi - lo).max()), 1.0)
     xs = np.linspace(lo[0] - pad, hi[0] + pad, 160)
