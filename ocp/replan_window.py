@@ -239,6 +239,7 @@ class Replanner:
         """The plan re-solved at ``t`` from ``p``, ``v``, Σ, started from ``previous`` (None: cold)."""
         from .direct.solver import solve_direct
         from .direct.warm_shift import shifted_point
+        from .model import Structure
 
         t_end, K = self.window(t)
         relaxed: dict[str, float] = {}
@@ -246,6 +247,8 @@ class Replanner:
         tr = self.transcription(sub)  # built before the flight by prepare(): not part of the re-solve time
         start = time.perf_counter()
         init: Any = None
+        if previous is not None and Structure.of(previous.problem) != Structure.of(sub):
+            previous = None  # a relaxation dropped a zone: the previous point has other rows (cold start)
         if previous is not None and self.warm_start == "shifted":
             P_new = tr.layout.pack(tr.layout.values(sub))  # cost_scale 1: solve_direct re-scales the point
             init = shifted_point(previous, self.transcription(previous.problem), tr, P_new, (t, t_end))

@@ -133,3 +133,15 @@ def test_re_planning_in_a_current_across_active_constraints_relaxes_instead_of_r
     for zone in ("keep_out[0]", "keep_out[1]"):
         assert closed[zone] < 0.3 * open_[zone]
     assert r["closed_loop"]["cost_mean"] < r["open_loop"]["cost_mean"]
+
+
+def test_a_re_plan_from_a_zones_centre_drops_the_zone_for_that_window_and_starts_cold() -> None:
+    data = yaml.safe_load((PROBLEMS / "keep_out.yaml").read_text())
+    data["solver"]["collocation"]["intervals"] = 30
+    problem = Problem.from_dict(data)
+    replanner = Replanner(problem)
+    plan = replanner.first_plan()
+    centre = np.array([problem.constraints.keep_out[0].center])  # nothing to shrink the disc to
+    new = replanner.solve(plan, 2.0, centre, np.zeros((1, 2)), problem.matrices()["Sigma0"])
+    assert replanner.records[-1].relaxed == {"keep_out[0]": problem.constraints.keep_out[0].radius}
+    assert new.success and len(new.problem.constraints.keep_out) == len(problem.constraints.keep_out) - 1
