@@ -285,6 +285,10 @@ class Problem(StrictModel):
                 )
             if sensor.measures == "point":
                 self._check_point_sensor(i, sensor)
+            elif sensor.measures is not None and method == "shooting":  # was silently measured as a point sensor
+                raise InvalidValue(f"sensors[{i}].measures", "expected 'point' with method 'shooting' (its sensors "
+                                   "measure the field where they are), got a matrix; use method 'direct' for fixed "
+                                   "rows")  # fmt: skip
             elif sensor.measures is not None:
                 rows = np.asarray(sensor.measures, dtype=float)
                 if rows.shape[1] != n:

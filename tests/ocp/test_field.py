@@ -156,6 +156,10 @@ def test_schema_refuses_inconsistent_field_files():
         noisy["sensors"][0]["noise"] = {"model": "quadratic_range", "beta": 1.0, "gamma": 1.0}
         ms.Problem.from_dict(noisy)
     assert ms.Problem.from_dict(field_problem()).solver.method == "shooting"  # the default for a field
+    fixed = field_problem()  # a fixed row was measured as a point sensor: J 27 % below the file's model (audit)
+    fixed["sensors"][0]["measures"] = [[1.0] + [0.0] * 8]
+    with pytest.raises(ConfigError, match=r"sensors\[0\]\.measures: expected 'point' with method 'shooting'"):
+        ms.Problem.from_dict(fixed)
 
 
 def test_terminal_position_and_control_bound_hold():
