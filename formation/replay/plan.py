@@ -49,6 +49,7 @@ __all__ = [
     "simulate_tracking",
     "discretise_process",
     "measurement_variances",
+    "measurement_matrices",
     "MonteCarloResult",
     "monte_carlo_filter",
     "replay_solution",
@@ -178,7 +179,7 @@ def measurement_variances(problem: Problem, positions: np.ndarray) -> np.ndarray
     Returns
     -------
     ndarray, shape (K, m)
-        Rows stacked sensor by sensor (``m = Σ_i m_i``), as in :func:`measurement_matrix`.
+        Rows stacked sensor by sensor (``m = Σ_i m_i``), as in :func:`measurement_matrices`.
     """
     import casadi as ca
 
@@ -197,9 +198,21 @@ def measurement_variances(problem: Problem, positions: np.ndarray) -> np.ndarray
     return np.stack(columns, axis=-1)
 
 
-def measurement_matrix(problem: Problem) -> np.ndarray:
-    """``C`` with every sensor's rows stacked, shape ``(m, n)``."""
-    return np.concatenate([problem.measurement_rows(i) for i in range(problem.N)])
+def measurement_matrices(problem: Problem, positions: np.ndarray) -> np.ndarray:
+    """``C_k`` with every sensor's rows stacked at each of the positions ``(K, N, 2)``, shape ``(K, m, n)``.
+
+    A point sensor (``measures: point``) measures the field where it is: its kriging row c(p_k)' follows the
+    flown position (eq. field.3); fixed rows are the same at every step.
+    """
+    K = positions.shape[0]
+    blocks = []
+    for i in range(problem.N):
+        if problem.is_point(i):
+            blocks.append(problem.process.field.process().weights(positions[:, i, :])[:, None, :])  # (K, 1, n)
+        else:
+            rows = problem.measurement_rows(i)
+            blocks.append(np.broadcast_to(rows, (K, *rows.shape)))
+    return np.concatenate(blocks, axis=1)
 
 
 @dataclass
@@ -276,7 +289,7 @@ def monte_carlo_filter(
     mats = problem.matrices()
     n, dt = problem.n, float(times[1] - times[0])
     F, Qd = discretise_process(mats["A"], mats["BQB"], dt)
-    C = measurement_matrix(problem)
+    C = measurement_matrices(problem, positions)  # (K, m, n): a point sensor's row follows its flown position
     R = measurement_variances(problem, positions) / dt  # ν_k ~ N(0, R(p_k)/Δt)
     L_Q, L_0 = np.linalg.cholesky(Qd + 1e-300 * np.eye(n)), np.linalg.cholesky(mats["Sigma0"])
     x_true = L_0 @ rng.standard_normal((runs, n, 1))  # x_0 ~ N(0, Σ0)
@@ -285,9 +298,9 @@ def monte_carlo_filter(
     for k in range(1, len(times)):
         raise_if_interrupted()  # a Ctrl-C that arrived inside CasADi code was only recorded
         x_true = F @ x_true + L_Q @ rng.standard_normal((runs, n, 1))
-        y = C @ x_true + np.sqrt(R[k])[:, None] * rng.standard_normal((runs, len(R[k]), 1))
+        y = C[k] @ x_true + np.sqrt(R[k])[:, None] * rng.standard_normal((runs, len(R[k]), 1))
         x_hat, P = kalman.predict(x_hat, P, F, Qd)  # docs/theory/cooperative.md, eq. cooperative.6 (same kernels)
-        x_hat, P, _, _ = kalman.update(x_hat, P, y, C, np.diag(R[k]))  # Joseph form
+        x_hat, P, _, _ = kalman.update(x_hat, P, y, C[k], np.diag(R[k]))  # Joseph form
         P = kalman.symmetrize(P)
         errors.append(x_hat - x_true)
         covariances.append(P)

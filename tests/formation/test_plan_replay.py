@@ -242,3 +242,31 @@ def test_a_shipped_example_run_by_name_finds_the_solution_solve_wrote_by_default
     copied = user / "mine" / "replay_hussein2008.yaml"  # a file of the user's own keeps its own relative path
     copied.parent.mkdir()
     assert resolve(copied, relative) == copied.parent / relative
+
+
+@pytest.mark.slow
+def test_a_point_sensor_of_a_field_measures_where_it_flies_in_the_sampled_filter():
+    # the filter froze each point sensor's kriging row at p0: replaying the shipped 5 × 5 plan it "delivered"
+    # 0.797 (the no-control baseline) where the plan promised 0.278; an independent filter along the flown path
+    # gave 0.2774 with the rows following the sensors (field audit)
+    from short_runs import field_solution
+
+    from mobisense.formation.replay.plan import measurement_matrices, predicted_covariance
+
+    solution = field_solution()
+    problem = solution.problem
+    times = np.linspace(0.0, 5.0, 501)
+    positions = ReferenceTrajectory.from_solution(solution)(times)[0]
+    C = measurement_matrices(problem, positions)
+    np.testing.assert_allclose(C[:, 0], problem.process.field.process().weights(positions[:, 0]), rtol=1e-14)
+    assert np.linalg.norm(C[-1] - C[0]) > 0.1  # the sensor moves: its row changes
+    predicted = predicted_covariance(solution, times)
+    result = monte_carlo_filter(problem, times, positions, predicted, 20, np.random.default_rng(0))
+    # the filter's own covariance along the flown path against the optimiser's Σ: the O(Δt) of the R/Δt
+    # sampling (measured on the default problem below 1 % at Δt = 0.02) plus PCHIP between the plan's nodes
+    M = problem.matrices()["M"]
+    promised, delivered = np.trace(M @ predicted[-1]), np.trace(M @ result.filter_covariance[-1])
+    assert abs(delivered / promised - 1) < 0.01
+    frozen = monte_carlo_filter(problem, times, np.broadcast_to(positions[:1], positions.shape), predicted, 20,
+                                np.random.default_rng(0))  # fmt: skip
+    assert np.trace(M @ frozen.filter_covariance[-1]) > promised * (1 + 10 * abs(delivered / promised - 1))
