@@ -29,7 +29,10 @@ from .field import shooting_substeps
 from .mobius import mobius_rk4_step
 from .problem import Problem
 
-__all__ = ["ShootingTrajectory", "FieldShooting", "substeps_for"]
+__all__ = ["FAR", "ShootingTrajectory", "FieldShooting", "substeps_for"]
+
+#: a sensor's distance from the field counts in the kinematic unit up to this many times the field's diagonal
+FAR = 10.0
 
 
 def substeps_for(problem: Problem, intervals: int, max_h_lambda: float = 0.25) -> int:
@@ -136,8 +139,14 @@ class FieldShooting:
         return (ca.vertcat(*g) if g else ca.MX(0, 1)), np.array(lbg), np.array(ubg)
 
     def length_scale(self) -> float:
-        """The largest sensor–state distance at the start, at least 1 (L): the kinematic unit."""
-        return max(1.0, *(np.linalg.norm(np.asarray(s.p0) - self.field.locations, axis=1).max()
+        """The largest sensor–state distance at the start, at least 1 (L): the kinematic unit.
+
+        A sensor's distance counts up to :data:`FAR` × the field's diagonal: one sensor out of reach (1e6 away)
+        set the unit of every sensor's control, and the fine solve ran out of iterations on a plan already optimal.
+        """
+        locations = self.field.locations
+        reach = FAR * max(float(np.linalg.norm(locations.max(axis=0) - locations.min(axis=0))), 1.0)
+        return max(1.0, *(min(float(np.linalg.norm(np.asarray(s.p0) - locations, axis=1).max()), reach)
                           for s in self.problem.sensors))  # fmt: skip
 
     def parameters(self, eps: float, cost_scale: float) -> np.ndarray:

@@ -279,3 +279,20 @@ def test_field_mapping_5x5_from_the_command_line(tmp_path, capsys):
     assert np.allclose(ds["sigma_diag"].values, np.diagonal(ds["Sigma"].values, axis1=1, axis2=2))
     for figure in ("variance_maps.png", "trace.png", "controls.png", "homotopy.png"):
         assert (out / figure).stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_a_sensor_far_out_of_reach_does_not_set_the_other_sensors_control_unit():
+    # the shipped 5 × 5 example with g1 moved 1e6 away: the fine solve ran out of Ipopt's iterations (exit 1)
+    # on a plan whose J equals, to 12 digits, the solves with g1 at x = 60 … 1e5 (field audit)
+    import yaml
+    from reference_problems import PROBLEMS
+
+    costs = []
+    for x in (300.0, 1e6):
+        data = yaml.safe_load((PROBLEMS / "field_mapping_5x5.yaml").read_text())
+        data["sensors"][0]["p0"] = [x, 1.0]
+        solution = ms.solve(ms.Problem.from_dict(data))
+        assert solution.success, solution.message
+        costs.append(solution.cost)
+    assert costs[1] == pytest.approx(costs[0], rel=1e-9)  # out of reach either way: the same optimum
