@@ -190,7 +190,13 @@ def _main(argv: Sequence[str] | None, said: list[str]) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exit_:  # --help, --version, usage errors: argparse has printed what to say
         return exit_.code if isinstance(exit_.code, int) else 2
-    from .core.interrupts import forget_interrupts, interrupt_handler, interrupt_received, raise_if_interrupted
+    from .core.interrupts import (
+        forget_interrupts,
+        interrupt_handler,
+        interrupt_received,
+        raise_if_interrupted,
+        stop_hard_inside_casadi,
+    )
 
     forget_interrupts()
     # Ctrl-C and SIGTERM (``kill``, a batch scheduler ending the job) both stop a command; the handler records
@@ -204,7 +210,8 @@ def _main(argv: Sequence[str] | None, said: list[str]) -> int:
     from .core.netcdf import recorded_command  # needs neither pydantic nor numpy
 
     try:
-        with recorded_command(argv), _notes():  # the "history" of every netCDF file written
+        # a signal held for seconds by one long CasADi call ends the process (core/interrupts.py)
+        with recorded_command(argv), _notes(), stop_hard_inside_casadi(_hard_stop):
             status = int(args.run(args) or 0)
             raise_if_interrupted()  # a signal that arrived in CasADi code and was not acted on before the end
             return status
@@ -220,6 +227,15 @@ def _main(argv: Sequence[str] | None, said: list[str]) -> int:
         np.seterr(**errors)
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+
+
+def _hard_stop() -> None:
+    """The one line of a command stopped inside a long CasADi call (written unbuffered: the process ends next)."""
+    try:
+        os.write(sys.__stderr__.fileno() if sys.__stderr__ else 2,
+                 b"mobisense: interrupted; files already written are complete\n")  # fmt: skip
+    except (OSError, ValueError):
+        pass
 
 
 @contextlib.contextmanager

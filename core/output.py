@@ -16,6 +16,7 @@ from pathlib import Path
 from types import TracebackType
 
 from .errors import ConfigError, OutputError
+from .interrupts import add_hard_stop_cleanup, remove_hard_stop_cleanup
 
 __all__ = [
     "DEFAULT_OUTPUT_ROOT",
@@ -191,11 +192,18 @@ class OutputFolder:
             pass
         self._fd = fd
         remove_stale_temporaries(self.path)
+        add_hard_stop_cleanup(self._release)  # a command ended inside a long CasADi call leaves nothing either
         return self
+
+    def _release(self) -> None:
+        """What a hard stop (core/interrupts.py) leaves: no lock, no temporary file, no folder this run created."""
+        remove_stale_temporaries(self.path)
+        self.__exit__(None, None, None)
 
     def __exit__(
         self, kind: type[BaseException] | None, value: BaseException | None, traceback: TracebackType | None
     ) -> None:
+        remove_hard_stop_cleanup(self._release)
         if self._fd is not None:
             try:
                 os.unlink(self.path / LOCK_NAME)

@@ -59,31 +59,41 @@ def shooting_substeps(spec: FieldSpec, noise_variances: list[float], duration: f
     return max(1, math.ceil(h * shooting_rate(spec, noise_variances) / max_h_lambda - 1e-9))
 
 
-def shooting_memory_bytes(n: int, intervals: int, substeps: int) -> int:
-    """Estimated peak memory (bytes) of a shooting solve: 8 n² ((K+1)(4m+2) + 3) for the NLP, 24 n² (K+1) for Σ(t).
+def shooting_memory_bytes(n: int, intervals: int, substeps: int, sensors: int = 1) -> int:
+    """Estimated peak memory (bytes) of a shooting solve with N = ``sensors``.
+
+    For the NLP 8 ((K+1)(n² (4m+2) + m (3N² + 4Nn)) + 3n²), and 24 n² (K+1) for Σ(t).
 
     The adjoint sweep keeps every interval's whitened Z and, per substep, about four n × n temporaries
-    (measured at n = 100, K = 100, m = 2: 85 MB above the interpreter's 95 MB; the NLP term gives 81 MB); the
-    solution holds Σ(t), its copy in the dataset and the baseline's. K·m, and so the memory, grows with the
-    horizon times λ_max (:func:`shooting_rate`), not with K: m falls as K grows.
+    (measured at n = 100, K = 100, m = 2: 85 MB above the interpreter's 95 MB; the NLP term gives 81 MB) and the
+    sensors' N × n rows and N × N Gram and Woodbury blocks (measured at n = 25, K = 20: 73 kB a substep for
+    N = 40, 0.30 MB for N = 100; the term gives 70 kB and 0.32 MB); the solution holds Σ(t), its copy in the
+    dataset and the baseline's. K·m, and so the memory, grows with the horizon times λ_max
+    (:func:`shooting_rate`), not with K: m falls as K grows.
     """
-    return 8 * n * n * ((intervals + 1) * (4 * substeps + 2) + 3) + 24 * n * n * (intervals + 1)
+    per_substep = n * n * 4 + 3 * sensors * sensors + 4 * sensors * n
+    return 8 * ((intervals + 1) * (substeps * per_substep + 2 * n * n) + 3 * n * n) + 24 * n * n * (intervals + 1)
 
 
-#: lower bounds of a shooting iteration's cost per RK4 substep: a fixed part (s) and the flops of ~4 n × n products
+#: lower bounds of a shooting iteration's cost per RK4 substep: a fixed part (s), the flops of ~4 n × n products,
+#: and a part per pair of sensors (their N × N Gram and Woodbury blocks: 2.7e-6 s N² measured at N = 40 and 100)
 SECONDS_PER_SUBSTEP = 5e-5
 FLOPS_PER_SECOND = 2e10
+SECONDS_PER_SENSOR_PAIR = 2e-6
 
 
-def shooting_seconds(n: int, intervals: int, substeps: int) -> float:
+def shooting_seconds(n: int, intervals: int, substeps: int, sensors: int = 1) -> float:
     """A lower estimate of a shooting solve's time (s): 10 iterations of K·m RK4 substeps.
 
     Each substep of an iteration (evaluations and the adjoint) costs at least :data:`SECONDS_PER_SUBSTEP` plus
-    ~4 n³ flops at :data:`FLOPS_PER_SECOND` (more than one core sustains). Measured: the 5 × 5 field's fine
-    solve (n = 25, K = 100, m = 2) took 2.7e-4 s per substep and iteration over its 31 iterations; the 10 × 10
-    field 31 s against 0.5 s estimated: a bound that refuses only what cannot finish in the time allowed.
+    ~4 n³ flops at :data:`FLOPS_PER_SECOND` (more than one core sustains) plus
+    :data:`SECONDS_PER_SENSOR_PAIR` N². Measured: the 5 × 5 field's fine solve (n = 25, K = 100, m = 2) took
+    2.7e-4 s per substep and iteration over its 31 iterations; the 10 × 10 field 31 s against 0.5 s estimated;
+    one gradient of the 5 × 5 field with N = 100 sensors (K = 20, m = 41) 22 s, 27 ms a substep: a bound that
+    refuses only what cannot finish in the time allowed.
     """
-    return 10.0 * intervals * substeps * (SECONDS_PER_SUBSTEP + 4.0 * float(n) ** 3 / FLOPS_PER_SECOND)
+    per_substep = SECONDS_PER_SUBSTEP + 4.0 * float(n) ** 3 / FLOPS_PER_SECOND + SECONDS_PER_SENSOR_PAIR * sensors**2
+    return 10.0 * intervals * substeps * per_substep
 
 
 class FieldKernel(StrictModel):

@@ -94,9 +94,11 @@ def shooting_estimate(problem: Problem) -> Estimate:
     if m == 1:  # one substep per interval: K itself sets K·m
         hint = "use fewer intervals (solver.shooting.intervals, --intervals) or a coarser grid (process.field.grid)"
     else:
-        hint = ("use a coarser grid (process.field.grid) or a shorter horizon; memory grows with n² K·m, and K·m "
-                "with the horizon times the field's fastest rate (docs/theory/field.md §3.3), not with K")
-    return Estimate(what, shooting_memory_bytes(n, o.intervals, m), hint, shooting_seconds(n, o.intervals, m))
+        hint = ("use a coarser grid (process.field.grid), fewer sensors or a shorter horizon; memory grows with "
+                "(n² + N²) K·m, and K·m with the horizon times the field's fastest rate (docs/theory/field.md §3.3), "
+                "not with K")
+    N = problem.N
+    return Estimate(what, shooting_memory_bytes(n, o.intervals, m, N), hint, shooting_seconds(n, o.intervals, m, N))
 
 
 def problem_estimates(

@@ -23,6 +23,7 @@ import pytest
 import yaml
 from hostile.harness import GOOD, RECORD, Outcome, attack, classify, finish, start, temporaries
 from hostile.inputs import KINDS, small_problem
+from reference_problems import PROBLEMS
 
 pytestmark = pytest.mark.slow  # each case starts a Python process (~1 s); some solve or sweep for seconds
 
@@ -257,6 +258,32 @@ def test_ctrl_c_stops_a_long_direct_solve_within_an_iteration(tmp_path):
     assert outcome.verdict in GOOD, outcome.problems
     assert outcome.seconds < 4, outcome.seconds  # an iteration and the clean-up; the rest of the solve is ≥ 8 s
     assert not out.exists()
+
+
+def _one_long_casadi_call(tmp_path: Path) -> Path:
+    """A field solve whose every gradient is one CasADi call of ≈ 25 s (5 × 5 field, 150 point sensors, K = 20)."""
+    data = yaml.safe_load((PROBLEMS / "field_mapping_5x5.yaml").read_text())
+    grid = np.linspace(0.5, 9.5, 13)
+    sensor = data["sensors"][0]
+    points = [(x, y) for x in grid for y in grid][:150]
+    data["sensors"] = [{**sensor, "name": f"s{i}", "p0": [float(x), float(y)]} for i, (x, y) in enumerate(points)]
+    data["solver"]["shooting"] = {"intervals": 20}
+    return KINDS["solve"].write(tmp_path, data)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_inside_one_long_casadi_call_ends_the_command_within_the_hard_stop_time(tmp_path, sig):
+    """A Python handler runs only between bytecodes: a signal during one long CasADi gradient was held until it
+    returned (here 26 s after Ctrl-C, two lines). Now the command ends HARD_STOP_SECONDS (3 s) after it, exit
+    130, one line, and leaves no folder, lock or temporary file."""
+    out = tmp_path / "out"
+    path = _one_long_casadi_call(tmp_path)
+    outcome = _interrupt("solve", KINDS["solve"].command(path, out), tmp_path, sig, 6.0)  # inside a gradient
+    outcome = classify(outcome, 130, ("interrupted",), tmp_path, None)
+    assert outcome.verdict in GOOD, outcome.problems
+    assert len(outcome.lines) == 1, outcome.stderr
+    assert outcome.seconds < 6, outcome.seconds  # 3 s and the exit; the rest of the gradient took 26 s
+    assert not out.exists() and temporaries(tmp_path) == []
 
 
 def test_solve_killed_then_rerun(tmp_path):
