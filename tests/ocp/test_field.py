@@ -226,6 +226,14 @@ def _noise(value: float):
     return apply
 
 
+def _sensors(count: int):
+    def apply(data):
+        data["sensors"] = [{**data["sensors"][0], "name": f"s{i}", "p0": [0.004 * i, 0.5]} for i in range(count)]
+        return data
+
+    return apply
+
+
 @pytest.mark.parametrize(
     ("grid", "shooting", "change", "options", "message"),
     [((1000, 1000), {}, None, [], "process.field.grid: expected nx·ny <= 2500"),
@@ -237,8 +245,14 @@ def _noise(value: float):
      # m = ceil(h λ_max / 0.25) = 2829 substeps; the noise variance (2aσ²/r ≫ a²) is the key named
      ((2, 2), {}, _noise(1e-9), [], "sensors[0].noise.variance_value: the noise variance 1e-09 makes the field's "
                                     "fastest rate λ_max = 1.41e+04 per unit time; on intervals h = 0.05 the shooting "
-                                    "method needs m = 2829 RK4 substeps (h·λ_max ≤ 0.25), expected at most 1000")],
-    ids=["grid", "memory", "budget", "substeps"],
+                                    "method needs m = 2829 RK4 substeps (h·λ_max ≤ 0.25), expected at most 1000"),
+     # the sensors' N × N blocks per substep: 1000 sensors were estimated as one (353 MiB) and died of bad_alloc
+     # after 3.6 GB; 3N² + 4Nn doubles a substep (measured 0.30 MB at N = 100 against 0.32 MB)
+     ((5, 5), {}, _sensors(1000), ["--max-memory", "4G"], "the shooting NLP (n = 25 field states, N = 1000 "
+                                                          "sensors, K = 100 intervals of m = 9 RK4 substeps) needs "
+                                                          "about 21.3 GiB"),
+     ((3, 3), {}, _sensors(200), ["--max-time", "1s"], "would compute for at least")],
+    ids=["grid", "memory", "budget", "substeps", "sensors-memory", "sensors-time"],
 )  # fmt: skip
 def test_hostile_sizes_are_refused_before_allocation(tmp_path, capsys, grid, shooting, change, options, message):
     import tracemalloc
