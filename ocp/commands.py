@@ -120,6 +120,14 @@ def _solve(args: argparse.Namespace, figures: Any) -> int:
     if problem.solver.method == "shooting" and (args.degree is not None or args.scheme is not None):
         raise ConfigError(f"{source}: --degree/--scheme: the shooting method has no collocation polynomials (its grid "
                           "is solver.shooting: --intervals sets K)")  # fmt: skip
+    if problem.solver.method == "shooting":  # accepted and silently without effect before (field audit)
+        given = [flag for flag, value in (("--strategy", args.strategy), ("--homotopy", args.homotopy),
+                                          ("--step", args.step), ("--homotopy-budget", args.homotopy_budget))
+                 if value is not None]  # fmt: skip
+        if given:
+            raise ConfigError(f"{source}: {'/'.join(given)}: the shooting method runs its own ε schedule (0.03 … 1 on "
+                              "a coarse grid, then ε = 1 on the fine one: docs/theory/field.md §3.4); leave "
+                              f"{'them' if len(given) > 1 else 'it'} out")  # fmt: skip
     cluster = Cluster.from_args(args)
     if args.multistart is None and (cluster.scheduler or cluster.workers):
         raise ConfigError(f"{source}: --workers/--scheduler: only used with --multistart")

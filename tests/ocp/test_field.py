@@ -310,3 +310,19 @@ def test_a_sensor_far_out_of_reach_does_not_set_the_other_sensors_control_unit()
         assert solution.success, solution.message
         costs.append(solution.cost)
     assert costs[1] == pytest.approx(costs[0], rel=1e-9)  # out of reach either way: the same optimum
+
+
+def test_options_of_the_direct_methods_homotopy_are_refused_for_a_field(tmp_path, capsys):
+    # --strategy, --homotopy, --step were accepted and changed nothing (the same 7 ε steps and J: field audit)
+    import yaml
+
+    from mobisense import cli
+
+    path = tmp_path / "field.yaml"
+    path.write_text(yaml.safe_dump(field_problem()))
+    for options, named in ((["--strategy", "cold"], "--strategy"), (["--homotopy", "none", "--step", "0.5"],
+                                                                     "--homotopy/--step")):  # fmt: skip
+        assert cli.main(["solve", str(path), "--out", str(tmp_path / "out"), *options]) == 2
+        err = capsys.readouterr().err
+        assert f"{path}: {named}: the shooting method runs its own ε schedule" in err and err.count("\n") == 1
+        assert not (tmp_path / "out").exists()
