@@ -91,6 +91,8 @@ def solve_shooting(
     result = fine.evaluate(w, cost_scale)
     record(1.0, result.costs[0] + result.costs[1], info, t0)
     status = SolveStatus.SOLVED if info["success"] else SolveStatus.FAILED
+    solved_eps = [step.eps for step in steps if step.success]
+    eps = 1.0 if info["success"] else max(solved_eps, default=0.0)  # the fine ε = 1 solve failed: what was solved
     full = o.full_sigma if o.full_sigma is not None else problem.n <= 25
     stats = {
         "start": start, "build_time_s": fine.build_time_s, "coarse_time_s": coarse_time,
@@ -100,9 +102,16 @@ def solve_shooting(
         "trace_Sigma_tf_reduction_percent": 100.0 * (1.0 - np.trace(result.Sigma[-1]) / baseline["trace_Sigma_tf"]),
         "min_sigma_eigenvalue": float(np.linalg.eigvalsh(result.Sigma).min()),
     }  # fmt: skip
+    message = f"Ipopt (L-BFGS, ε = 1 on K = {fine.K}): {info['status']}"
+    if not info["success"]:
+        worst = fine.worst_violation(info["g"], float(fine.parameters(1.0, cost_scale)[2]))
+        if worst is not None:
+            stats["worst_violation"] = worst
+            message += (f"; worst-violated constraint: {worst['constraint']} at t = {worst['time']:.4g} "
+                        f"(violation {worst['violation']:.3g})")  # fmt: skip
     return Solution(
         problem=problem, method="shooting", status=status,
-        message=f"Ipopt (L-BFGS, ε = 1 on K = {fine.K}): {info['status']}", eps=1.0,
+        message=message, eps=eps,
         t=result.t, Sigma=result.Sigma, p=result.p, v=result.v, t_u=result.t, u=result.u,
         terminal_cost=result.costs[0], running_cost=result.costs[1], control_energy=result.costs[2],
         homotopy=steps, baseline=baseline, stats=stats,

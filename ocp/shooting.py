@@ -122,21 +122,42 @@ class FieldShooting:
         g: list[Any] = []
         lbg: list[float] = []
         ubg: list[float] = []
+        self.row_labels: list[tuple[str, float, float | None]] = []  # (what, time, row scale or None: |u| ≤ u_max)
         length = self.length_scale()
-        T = self.problem.horizon.tf - self.problem.horizon.t0
+        t0, tf = self.problem.horizon.t0, self.problem.horizon.tf
         for i, s in enumerate(self.problem.sensors):
-            for key, end, scale in (("p", pK, length), ("v", vK, length / T)):
+            for key, end, scale in (("p", pK, length), ("v", vK, length / (tf - t0))):
                 target = None if s.terminal is None else getattr(s.terminal, key)
                 if target is not None:
                     g.append((end[2 * i : 2 * i + 2] - ca.DM(target)) / scale)
                     lbg += [0.0, 0.0]
                     ubg += [0.0, 0.0]
+                    self.row_labels += [(f"terminal {key}[{c}] of sensor {s.name}", tf, scale) for c in range(2)]
             if s.u_max is not None:
                 for k in range(self.K + 1):
                     g.append((ca.sumsqr(U[2 * i : 2 * i + 2, k]) - s.u_max**2) / u_scale**2)
                     lbg.append(-np.inf)
                     ubg.append(0.0)
+                    self.row_labels.append((f"|u| ≤ u_max of sensor {s.name}", t0 + k * self.h, None))
         return (ca.vertcat(*g) if g else ca.MX(0, 1)), np.array(lbg), np.array(ubg)
+
+    def worst_violation(self, g: np.ndarray, u_scale: float) -> dict[str, Any] | None:
+        """The most violated constraint of the rows ``g`` of a solve, in physical units (None: there are none).
+
+        ``{constraint, time, violation}``: a terminal position (L) or velocity (L/T) off its target, or
+        |u| − u_max (L/T²) at a node; ``u_scale`` is the control scale of the solve's parameters.
+        """
+        if not len(g):
+            return None
+        excess = np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0)
+        j = int(np.argmax(excess))
+        what, when, scale = self.row_labels[j]
+        if scale is not None:
+            size = float(abs(g[j]) * scale)
+        else:  # the row is (|u|² − u_max²) / u_scale²
+            u_max = next(s.u_max for s in self.problem.sensors if what.endswith(f"sensor {s.name}"))
+            size = float(np.sqrt(max(u_max**2 + g[j] * u_scale**2, 0.0)) - u_max)
+        return {"constraint": what, "time": float(when), "violation": size}
 
     def length_scale(self) -> float:
         """The largest sensor–state distance at the start, at least 1 (L): the kinematic unit.
@@ -224,7 +245,7 @@ class FieldShooting:
         stats = solver.stats()
         return np.asarray(sol["x"]).ravel(), {
             "status": str(stats["return_status"]), "success": bool(stats["success"]),
-            "iterations": int(stats["iter_count"]),
+            "iterations": int(stats["iter_count"]), "g": np.asarray(sol["g"]).ravel(),
         }  # fmt: skip
 
     def evaluate(self, w: np.ndarray, cost_scale: float = 1.0) -> ShootingTrajectory:

@@ -326,3 +326,25 @@ def test_options_of_the_direct_methods_homotopy_are_refused_for_a_field(tmp_path
         err = capsys.readouterr().err
         assert f"{path}: {named}: the shooting method runs its own ε schedule" in err and err.count("\n") == 1
         assert not (tmp_path / "out").exists()
+
+
+def test_an_infeasible_field_solve_reports_what_was_solved_and_its_worst_constraint_in_physical_units():
+    # summary.json said eps_reached 1.0 and worst_violation null when no step had succeeded (field audit)
+    data = field_problem(shooting={"intervals": 20, "coarse_intervals": 10})
+    data["sensors"][0].update(terminal={"p": [3.5, 3.5]}, u_max=0.001)  # 0.5 u_max T² = 0.0125 of a 4.24 way
+    solution = ms.solve(ms.Problem.from_dict(data))
+    assert not solution.success
+    summary = solution.summary()
+    assert summary["eps_reached"] == max([s.eps for s in solution.homotopy if s.success], default=0.0) < 1.0
+    worst = summary["worst_violation"]
+    # in physical units, as the returned plan has it: Ipopt stopped on a plan that reaches the target by breaking
+    # the bound (or keeps the bound and misses the target)
+    if worst["constraint"] == "|u| ≤ u_max of sensor g1":
+        k = int(np.argmin(np.abs(solution.t_u - worst["time"])))
+        assert worst["violation"] == pytest.approx(np.linalg.norm(solution.u[k, 0]) - 0.001, rel=1e-9)
+    else:
+        c = int(worst["constraint"][len("terminal p[")])
+        assert worst["constraint"].startswith("terminal p[") and worst["time"] == 5.0
+        assert worst["violation"] == pytest.approx(abs(solution.p[-1, 0, c] - 3.5), rel=1e-9)
+    assert worst["violation"] > 0.1
+    assert f"worst-violated constraint: {worst['constraint']} at t = " in solution.message
