@@ -311,7 +311,10 @@ class Solution:
 
         For a direct solution the states are the collocation polynomials through each interval's d + 1
         nodes and the controls the Lagrange polynomials through its d collocation nodes (exactly the
-        functions the NLP optimised); for a solution on BVP nodes, cubic splines through the nodes.
+        functions the NLP optimised); for a field's shooting solution the piecewise-linear controls and the
+        positions and velocities they give (eq. field.7, exact) with Σ by PCHIP between the nodes, or NaN when
+        the solution holds no Σ (a field of more than 25 states keeps its diagonal only); for a solution on
+        BVP nodes, cubic splines through the nodes.
 
         Parameters
         ----------
@@ -329,6 +332,8 @@ class Solution:
         if times.size and (times.min() < t0 - tol or times.max() > tf + tol):
             raise ValueError(f"t: expected times in [{t0:g}, {tf:g}], got [{times.min():g}, {times.max():g}]")
         times = np.clip(times, t0, tf)
+        if self.method == "shooting":
+            return self._sample_shooting(times)
         x = self.states()
         if self.collocation is not None:
             x_t, u_t = self._sample_collocation(times, x)
@@ -339,6 +344,26 @@ class Solution:
             u_t = CubicSpline(self.t_u, self.u.reshape(len(self.t_u), -1), axis=0)(times)
         Sigma, p, v = self.layout.split(x_t)
         return TrajectorySample(times, Sigma, p, v, u_t.reshape(len(times), self.problem.N, 2))
+
+    def _sample_shooting(self, times: np.ndarray) -> TrajectorySample:
+        """The shooting's own functions: u linear on each interval, p and v integrated exactly (eq. field.7)."""
+        from scipy.interpolate import PchipInterpolator
+
+        t = self.t
+        k = np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 2)
+        h = (t[k + 1] - t[k])[:, None, None]
+        s = (times - t[k])[:, None, None]
+        tau = s / h
+        u0, du = self.u[k], self.u[k + 1] - self.u[k]
+        u = u0 + du * tau
+        v = self.v[k] + h * (u0 * tau + du * tau**2 / 2)
+        p = self.p[k] + s * self.v[k] + h**2 * (u0 * tau**2 / 2 + du * tau**3 / 6)
+        n = self.problem.n
+        if self.Sigma is None or np.ndim(self.Sigma) != 3:
+            Sigma = np.full((len(times), n, n), np.nan)
+        else:
+            Sigma = PchipInterpolator(t, self.Sigma, axis=0)(times)
+        return TrajectorySample(times, Sigma, p, v, u)
 
     def _sample_collocation(self, times: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         from .collocation import CollocationScheme

@@ -348,3 +348,28 @@ def test_an_infeasible_field_solve_reports_what_was_solved_and_its_worst_constra
         assert worst["violation"] == pytest.approx(abs(solution.p[-1, 0, c] - 3.5), rel=1e-9)
     assert worst["violation"] > 0.1
     assert f"worst-violated constraint: {worst['constraint']} at t = " in solution.message
+
+
+def test_sampling_a_shooting_solution_gives_its_own_piecewise_linear_controls_and_exact_path(tmp_path):
+    # sample() went through cubic splines (controls 0.7 % off the plan's at mid-intervals) and raised IndexError
+    # on a loaded solution without Σ (field audit)
+    from short_runs import field_solution
+
+    solution = field_solution(shooting={"full_sigma": False})
+    solution.save(tmp_path)
+    loaded = ms.Solution.load(tmp_path / "solution.nc")
+    times = np.sort(np.random.default_rng(0).uniform(0.0, 5.0, 40))
+    sample = loaded.sample(times)
+    assert np.isnan(sample.Sigma).all()  # not stored: said so, not guessed
+    t, u = solution.t, solution.u[:, 0]
+
+    def control(s: float) -> np.ndarray:  # the plan: linear between the nodes
+        return np.array([np.interp(s, t, u[:, 0]), np.interp(s, t, u[:, 1])])
+
+    # the double integrator under that control, by scipy at tight tolerances (independent of eq. field.7)
+    flown = solve_ivp(lambda s, y: np.concatenate([y[2:], control(s)]), (0.0, 5.0),
+                      np.concatenate([solution.p[0, 0], solution.v[0, 0]]), method="DOP853", t_eval=times,
+                      rtol=1e-12, atol=1e-12, max_step=float(t[1] - t[0]))  # fmt: skip
+    np.testing.assert_allclose(sample.u[:, 0], np.array([control(s) for s in times]), atol=1e-12)
+    np.testing.assert_allclose(sample.p[:, 0], flown.y[:2].T, atol=1e-9)
+    np.testing.assert_allclose(sample.v[:, 0], flown.y[2:].T, atol=1e-9)
