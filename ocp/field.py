@@ -195,6 +195,8 @@ class ShootingOptions(StrictModel):
     homotopy_tolerance: float = Field(1e-5, gt=0.0, lt=1.0, description="Ipopt tol of the coarse steps")
     coarse_max_iterations: int = Field(300, ge=1, description="Ipopt iterations per coarse step")
     full_sigma: bool | None = Field(None, description="write the full Σ(t) to solution.nc (default: n <= 25)")
+    starts: int = Field(0, ge=0, le=100, description="random coarse ε = 1 starts beside the ε-homotopy; the lowest "
+                        "coarse J starts the fine solve (docs/theory/field.md §3.4)")  # fmt: skip
 
     @model_validator(mode="after")
     def _schedule(self) -> ShootingOptions:
