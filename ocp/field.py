@@ -59,10 +59,17 @@ def shooting_substeps(spec: FieldSpec, noise_variances: list[float], duration: f
     return max(1, math.ceil(h * shooting_rate(spec, noise_variances) / max_h_lambda - 1e-9))
 
 
+#: memory per shooting interval beyond its matrices (the expression graph's nodes and Ipopt's per-variable
+#: vectors): the 5 × 5 field with N = 4 on K = 10 000 intervals (m = 1) peaked at 1.27 GB against 763 MiB estimated
+#: without it (field audit, one measurement), 51 kB an interval
+BYTES_PER_INTERVAL = 52_000
+
+
 def shooting_memory_bytes(n: int, intervals: int, substeps: int, sensors: int = 1) -> int:
     """Estimated peak memory (bytes) of a shooting solve with N = ``sensors``.
 
-    For the NLP 8 ((K+1)(n² (4m+2) + m (3N² + 4Nn)) + 3n²), and 24 n² (K+1) for Σ(t).
+    For the NLP 8 ((K+1)(n² (4m+2) + m (3N² + 4Nn)) + 3n²), 24 n² (K+1) for Σ(t), and
+    :data:`BYTES_PER_INTERVAL` K.
 
     The adjoint sweep keeps every interval's whitened Z and, per substep, about four n × n temporaries
     (measured at n = 100, K = 100, m = 2: 85 MB above the interpreter's 95 MB; the NLP term gives 81 MB) and the
@@ -72,7 +79,8 @@ def shooting_memory_bytes(n: int, intervals: int, substeps: int, sensors: int = 
     (:func:`shooting_rate`), not with K: m falls as K grows.
     """
     per_substep = n * n * 4 + 3 * sensors * sensors + 4 * sensors * n
-    return 8 * ((intervals + 1) * (substeps * per_substep + 2 * n * n) + 3 * n * n) + 24 * n * n * (intervals + 1)
+    nlp = 8 * ((intervals + 1) * (substeps * per_substep + 2 * n * n) + 3 * n * n) + 24 * n * n * (intervals + 1)
+    return nlp + BYTES_PER_INTERVAL * intervals
 
 
 #: lower bounds of a shooting iteration's cost per RK4 substep: a fixed part (s), the flops of ~4 n × n products,
