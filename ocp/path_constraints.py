@@ -40,6 +40,7 @@ __all__ = [
     "path_rows",
     "margins",
     "constraint_sizes",
+    "polygon_scale_outside",
     "group_names",
     "check_initial_state",
     "check_terminal_states",
@@ -84,8 +85,17 @@ class KeepOutPolygon(StrictModel):
     @property
     def orientation(self) -> int:
         """+1 counter-clockwise, −1 clockwise."""
+        return 1 if self._signed_area() > 0 else -1
+
+    @property
+    def area(self) -> float:
+        """The polygon's area (L²)."""
+        return abs(self._signed_area())
+
+    def _signed_area(self) -> float:
+        """The shoelace formula: positive counter-clockwise."""
         V = np.asarray(self.polygon, float)
-        return 1 if np.sum(V[:, 0] * np.roll(V[:, 1], -1) - np.roll(V[:, 0], -1) * V[:, 1]) > 0 else -1
+        return 0.5 * float(np.sum(V[:, 0] * np.roll(V[:, 1], -1) - np.roll(V[:, 0], -1) * V[:, 1]))
 
 
 class Workspace(StrictModel):
@@ -376,12 +386,7 @@ def constraint_sizes(constraints: PathConstraints) -> dict[str, float]:
     """
     sizes: dict[str, float] = {}
     for k, zone in enumerate(constraints.keep_out):
-        if isinstance(zone, KeepOutDisc):
-            sizes[f"keep_out[{k}]"] = float(zone.radius)
-        else:
-            V = np.asarray(zone.polygon, float)
-            area = 0.5 * abs(float(np.sum(V[:, 0] * np.roll(V[:, 1], -1) - np.roll(V[:, 0], -1) * V[:, 1])))
-            sizes[f"keep_out[{k}]"] = area**0.5
+        sizes[f"keep_out[{k}]"] = float(zone.radius) if isinstance(zone, KeepOutDisc) else zone.area**0.5
     if constraints.min_separation is not None:
         sizes["min_separation"] = float(constraints.min_separation)
     if constraints.max_speed is not None:
@@ -390,6 +395,23 @@ def constraint_sizes(constraints: PathConstraints) -> dict[str, float]:
         w = constraints.workspace
         sizes["workspace"] = float(min(w.x[1] - w.x[0], w.y[1] - w.y[0]))
     return sizes
+
+
+def polygon_scale_outside(zone: KeepOutPolygon, p: np.ndarray) -> float:
+    """The largest s ≤ 1 for which the polygon, scaled by s about its vertices' mean c, leaves ``p`` (N, 2) outside.
+
+    On its edges counts as outside; 0 when a point is at c. Scaled by s, edge e (vertex a_e, outward unit
+    normal n_e) keeps q outside when n_eᵀ(q − c) ≥ s n_eᵀ(a_e − c), and n_eᵀ(a_e − c) > 0 for a convex polygon
+    around c: q is outside for s up to max_e n_eᵀ(q − c) / n_eᵀ(a_e − c).
+    """
+    V = np.asarray(zone.polygon, float)
+    c = V.mean(axis=0)
+    edges = _polygon_edges(V, len(V), zone.orientation)
+    a = np.array([vertex for vertex, _ in edges])
+    n = np.array([normal for _, normal in edges])
+    reach = np.einsum("ej,ej->e", n, a - c)  # distance of each edge's line from c, > 0
+    s = ((np.asarray(p, float) - c) @ n.T / reach).max(axis=1)  # (N,)
+    return float(np.clip(s.min(), 0.0, 1.0))
 
 
 def _closest_pairs(p: np.ndarray) -> np.ndarray:

@@ -69,10 +69,10 @@ def relax_constraints(constraints: dict[str, Any], p: np.ndarray, v: np.ndarray)
     A disc's radius shrinks to the nearest sensor's distance, a polygon shrinks about its vertices' mean
     until every sensor is outside, ``min_separation`` drops to the closest pair's distance, ``max_speed``
     rises to the fastest sensor's speed and the workspace grows to hold every sensor, each with a clearance
-    of :data:`RELAXATION` of its size. A zone whose centre a sensor sits on (nothing left to shrink to) is
-    dropped from the window.
+    of :data:`RELAXATION` of its size. A zone shrunk below :data:`RELAXATION` of its size (a sensor on or next to
+    its centre) is dropped from the window.
     """
-    from .path_constraints import PathConstraints, margins
+    from .path_constraints import KeepOutPolygon, PathConstraints, margins, polygon_scale_outside
 
     violated = {
         k: float(x[0]) for k, x in margins(PathConstraints(**constraints), p[None], v[None]).items() if x[0] > 0
@@ -84,21 +84,13 @@ def relax_constraints(constraints: dict[str, Any], p: np.ndarray, v: np.ndarray)
             continue
         if "radius" in zone:
             nearest = float(np.min(np.linalg.norm(p - np.asarray(zone["center"], float), axis=1)))
-            zone["radius"] = nearest * (1 - RELAXATION)
-            keep[k] = zone["radius"] > RELAXATION * (zone["radius"] + nearest)
-            continue
-        V = np.asarray(zone["polygon"], float)
-        centre = V.mean(axis=0)
-        one = {"keep_out": [{"polygon": V.tolist()}]}
-        low, high = 0.0, 1.0  # scale factors about the centre: sensors outside at `low`, inside at `high`
-        for _ in range(60):
-            mid = 0.5 * (low + high)
-            one["keep_out"][0]["polygon"] = (centre + mid * (V - centre)).tolist()
-            depth = margins(PathConstraints(**one), p[None], v[None])["keep_out[0]"][0]
-            low, high = (mid, high) if depth < 0 else (low, mid)
-        scale = low * (1 - RELAXATION)
-        zone["polygon"] = (centre + scale * (V - centre)).tolist()
-        keep[k] = scale > RELAXATION
+            scale = nearest * (1 - RELAXATION) / zone["radius"]
+            zone["radius"] *= scale
+        else:
+            V = np.asarray(zone["polygon"], float)
+            scale = polygon_scale_outside(KeepOutPolygon(polygon=zone["polygon"]), p) * (1 - RELAXATION)
+            zone["polygon"] = (V.mean(axis=0) + scale * (V - V.mean(axis=0))).tolist()
+        keep[k] = scale > RELAXATION  # shrunk to nothing (a sensor on its centre): dropped
     if zones:
         constraints["keep_out"] = [zone for zone, kept in zip(zones, keep, strict=True) if kept]
     if "min_separation" in violated:

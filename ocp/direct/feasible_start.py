@@ -124,8 +124,7 @@ def detour_positions(problem: Problem, p: np.ndarray, v: np.ndarray, margin: flo
                 out[t, i] = c + along * heading + np.sqrt(max(r * r - along * along, 0.0)) * side  # fmt: skip
             continue
         V = np.asarray(zone.polygon, float)
-        a, b = V[1:-1] - V[0], V[2:] - V[0]
-        grow = margin * np.sqrt(0.5 * abs(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])))  # √area
+        grow = margin * np.sqrt(zone.area)
         closed = np.vstack([V, V[:1]])
         edges = closed[1:] - closed[:-1]
         normals = np.stack([edges[:, 1], -edges[:, 0]], axis=1) * zone.orientation
