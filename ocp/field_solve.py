@@ -30,6 +30,8 @@ def _best_coarse_start(
     fields the homotopy's basin was 7–14 % above a random start's (docs/theory/field.md §3.4).
     """
     o, tol = problem.solver.shooting, problem.solver.tolerance
+    if not o.starts:
+        return homotopy, []
     J = float(sum(coarse.cost_terms(homotopy, coarse.parameters(1.0, cost_scale))[:2]))
     best, lowest, starts = homotopy, J, [{"start": "homotopy", "cost": J}]
     for k in range(1, o.starts + 1):
@@ -126,7 +128,7 @@ def solve_shooting(
     full = o.full_sigma if o.full_sigma is not None else problem.n <= 25
     stats = {
         "start": start, "build_time_s": fine.build_time_s, "coarse_time_s": coarse_time,
-        **({"coarse_starts": starts} if start == StartKind.COARSE.value and o.starts else {}),
+        **({"coarse_starts": starts} if starts else {}),
         "wall_time_s": time.perf_counter() - started, "nlp_variables": fine.nw, "intervals": fine.K,
         "substeps": fine.m, "coarse_intervals": o.coarse_intervals, "full_sigma": bool(full),
         "trace_Sigma_tf": float(np.trace(result.Sigma[-1])), "field_jitter": fine.field.jitter_used,

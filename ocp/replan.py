@@ -44,7 +44,7 @@ class FlightResult:
     p: np.ndarray
     Sigma: np.ndarray
     cost: float
-    v: np.ndarray | None = None
+    v: np.ndarray
     plans: list[tuple[float, np.ndarray, np.ndarray]] = field(default_factory=list)
     records: list[ReplanRecord] = field(default_factory=list)
 
@@ -117,7 +117,7 @@ def fly(
 
     for j in range(steps + 1):
         t = t0 + j * dt
-        result.t[j], result.p[j], result.v[j], result.Sigma[j] = t, p, v, Sigma  # type: ignore[index]
+        result.t[j], result.p[j], result.v[j], result.Sigma[j] = t, p, v, Sigma
         if j == steps:
             break
         if replanner is not None and t >= next_replan - 1e-9 and tf - t > 2 * dt:

@@ -122,7 +122,8 @@ class FieldShooting:
         g: list[Any] = []
         lbg: list[float] = []
         ubg: list[float] = []
-        self.row_labels: list[tuple[str, float, float | None]] = []  # (what, time, row scale or None: |u| ≤ u_max)
+        # each row: what, time, its scale, and u_max for a |u| ≤ u_max row (its size is then |u| − u_max)
+        self.row_labels: list[tuple[str, float, float, float | None]] = []
         length = self.length_scale()
         t0, tf = self.problem.horizon.t0, self.problem.horizon.tf
         for i, s in enumerate(self.problem.sensors):
@@ -132,13 +133,13 @@ class FieldShooting:
                     g.append((end[2 * i : 2 * i + 2] - ca.DM(target)) / scale)
                     lbg += [0.0, 0.0]
                     ubg += [0.0, 0.0]
-                    self.row_labels += [(f"terminal {key}[{c}] of sensor {s.name}", tf, scale) for c in range(2)]
+                    self.row_labels += [(f"terminal {key}[{c}] of sensor {s.name}", tf, scale, None) for c in range(2)]
             if s.u_max is not None:
                 for k in range(self.K + 1):
                     g.append((ca.sumsqr(U[2 * i : 2 * i + 2, k]) - s.u_max**2) / u_scale**2)
                     lbg.append(-np.inf)
                     ubg.append(0.0)
-                    self.row_labels.append((f"|u| ≤ u_max of sensor {s.name}", t0 + k * self.h, None))
+                    self.row_labels.append((f"|u| ≤ u_max of sensor {s.name}", t0 + k * self.h, 1.0, s.u_max))
         return (ca.vertcat(*g) if g else ca.MX(0, 1)), np.array(lbg), np.array(ubg)
 
     def worst_violation(self, g: np.ndarray, u_scale: float) -> dict[str, Any] | None:
@@ -151,11 +152,10 @@ class FieldShooting:
             return None
         excess = np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0)
         j = int(np.argmax(excess))
-        what, when, scale = self.row_labels[j]
-        if scale is not None:
+        what, when, scale, u_max = self.row_labels[j]
+        if u_max is None:
             size = float(abs(g[j]) * scale)
         else:  # the row is (|u|² − u_max²) / u_scale²
-            u_max = next(s.u_max for s in self.problem.sensors if what.endswith(f"sensor {s.name}"))
             size = float(np.sqrt(max(u_max**2 + g[j] * u_scale**2, 0.0)) - u_max)
         return {"constraint": what, "time": float(when), "violation": size}
 

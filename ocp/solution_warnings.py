@@ -70,12 +70,16 @@ def constraint_warning(solution: Any) -> str | None:
                           f"{entry['max_violation_at_nodes']:.2g})")  # fmt: skip
     if not broken:
         return None
-    intervals = solution.collocation[2] if solution.collocation is not None else solution.stats.get("intervals")
     return (
         f"the plan's controls, flown, break {'; '.join(broken)}: the constraints hold at the collocation nodes "
-        f"only; solve on more than K = {intervals} intervals (--intervals), and if the violation does not shrink, "
-        "no path keeps the constraint from this start"
+        f"only; solve on more than K = {_intervals(solution)} intervals (--intervals), and if the violation does "
+        "not shrink, no path keeps the constraint from this start"
     )
+
+
+def _intervals(solution: Any) -> Any:
+    """The solution's number of intervals K (of its collocation, else of its shooting grid)."""
+    return solution.collocation[2] if solution.collocation is not None else solution.stats.get("intervals")
 
 
 def plan_warning(solution: Any) -> str | None:
@@ -92,11 +96,10 @@ def plan_warning(solution: Any) -> str | None:
     difference = check["relative_difference"]
     if difference is None or abs(difference) <= PLAN_TOLERANCE:
         return None
-    intervals = solution.collocation[2] if solution.collocation is not None else solution.stats.get("intervals")
     return (
         f"the grid does not resolve this plan: its controls re-integrated give J = {check['cost']:.8g}, "
         f"{100 * abs(difference):.3g} % {'below' if difference > 0 else 'above'} the optimiser's (relative "
-        f"difference {difference:+.2g}, beyond ±{PLAN_TOLERANCE:g}); solve on more than K = {intervals} "
+        f"difference {difference:+.2g}, beyond ±{PLAN_TOLERANCE:g}); solve on more than K = {_intervals(solution)} "
         "intervals (--intervals) before trusting J or the choice between starts"
     )
 

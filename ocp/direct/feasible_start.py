@@ -208,8 +208,10 @@ def cold_start(ctx: Any) -> np.ndarray:
     P = ctx.parameters(1.0)
     layout = tr.structure.state
     _, p, v = layout.split(tr.unpack(ctx.w0, P)["xs"])
-    guess = detour_guess(problem, tr, ctx.w0, P) if needs_detour(problem, p) else ctx.w0
-    _, p, v = layout.split(tr.unpack(guess, P)["xs"])
+    guess = ctx.w0
+    if needs_detour(problem, p):
+        guess = detour_guess(problem, tr, ctx.w0, P)
+        _, p, v = layout.split(tr.unpack(guess, P)["xs"])
     coasting = guess_violation(problem, p, v)
     if coasting == 0.0:
         return guess
