@@ -26,7 +26,7 @@ from typing import Any, NoReturn
 
 from . import __version__
 
-__all__ = ["COMMANDS", "build_parser", "main"]
+__all__ = ["COMMANDS", "INTERRUPTED", "build_parser", "main"]
 
 #: sub-command name -> "module:class" implementing it
 COMMANDS: dict[str, str] = {
@@ -115,6 +115,10 @@ def build_parser(commands: Sequence[str] | None = None) -> argparse.ArgumentPars
     return parser
 
 
+#: what an interrupted command says (Ctrl-C or SIGTERM), however it was stopped
+INTERRUPTED = "interrupted; files already written are complete"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (also used by ``python -m``/console script)."""
     said: list[str] = []
@@ -137,7 +141,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return status
     except KeyboardInterrupt:  # also during the imports, or while an error is being reported
         if not said:
-            _say("interrupted; files already written are complete")
+            _say(INTERRUPTED)
         return 130
     except BrokenPipeError:  # stdout closed by the reader (``mobisense examples | head -1``): end quietly
         _discard_stdout()
@@ -232,8 +236,7 @@ def _main(argv: Sequence[str] | None, said: list[str]) -> int:
 def _hard_stop() -> None:
     """The one line of a command stopped inside a long CasADi call (written unbuffered: the process ends next)."""
     try:
-        os.write(sys.__stderr__.fileno() if sys.__stderr__ else 2,
-                 b"mobisense: interrupted; files already written are complete\n")  # fmt: skip
+        os.write(sys.__stderr__.fileno() if sys.__stderr__ else 2, f"mobisense: {INTERRUPTED}\n".encode())
     except (OSError, ValueError):
         pass
 
@@ -267,7 +270,7 @@ def _interrupted(said: list[str]) -> int:
 
     forget_interrupts()
     said.append("interrupted")
-    _say("interrupted; files already written are complete")
+    _say(INTERRUPTED)
     return 130
 
 
