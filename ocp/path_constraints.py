@@ -44,7 +44,6 @@ __all__ = [
     "group_names",
     "check_initial_state",
     "check_terminal_states",
-    "draw_constraints",
 ]
 
 #: the smooth outside-of-polygon row is conservative by at most this fraction of √area (eq. path.2)
@@ -489,25 +488,3 @@ def _offending_sensor(constraints: PathConstraints, name: str, p: np.ndarray, v:
 def _without_separation(constraints: PathConstraints) -> PathConstraints:
     """The constraints of one sensor alone: ``min_separation`` dropped."""
     return constraints.model_copy(update={"min_separation": None})  # validated already: not again
-
-
-def draw_constraints(ax: Any, constraints: PathConstraints | None) -> None:
-    """Draw keep-out zones (hatched) and the workspace (dashed) on a matplotlib axis of the plane."""
-    if constraints is None:
-        return
-    from matplotlib.patches import Circle, Polygon, Rectangle
-
-    style = {"facecolor": "0.55", "edgecolor": "k", "alpha": 0.6, "hatch": "//", "zorder": 3}
-    for k, zone in enumerate(constraints.keep_out):
-        label = "keep-out zones" if k == 0 else None
-        if isinstance(zone, KeepOutDisc):
-            ax.add_patch(Circle(tuple(zone.center), zone.radius, label=label, **style))
-        else:
-            ax.add_patch(Polygon(np.asarray(zone.polygon), closed=True, label=label, **style))
-    if constraints.workspace is not None:
-        w = constraints.workspace
-        ax.add_patch(
-            Rectangle(
-                (w.x[0], w.y[0]), w.x[1] - w.x[0], w.y[1] - w.y[0], fill=False, ls="--", ec="k", label="workspace"
-            )
-        )

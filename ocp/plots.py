@@ -15,7 +15,7 @@ import casadi as ca
 import numpy as np
 
 from ..core.files import write_figure
-from .path_constraints import draw_constraints
+from .path_constraints import KeepOutDisc, PathConstraints
 from .registries import NOISE_MODELS
 from .solution import Solution
 
@@ -23,6 +23,7 @@ __all__ = [
     "FIGURES",
     "effective_noise",
     "coasting_covariance",
+    "draw_constraints",
     "plot_paths",
     "plot_covariance",
     "plot_controls",
@@ -47,6 +48,28 @@ def effective_noise(solution: Solution, sensor: int, points: np.ndarray) -> np.n
     return 1.0 / np.asarray(f(points.T)).ravel()
 
 
+def draw_constraints(ax: Any, constraints: PathConstraints | None) -> None:
+    """Draw keep-out zones (hatched) and the workspace (dashed) on a matplotlib axis of the plane."""
+    if constraints is None:
+        return
+    from matplotlib.patches import Circle, Polygon, Rectangle
+
+    style = {"facecolor": "0.55", "edgecolor": "k", "alpha": 0.6, "hatch": "//", "zorder": 3}
+    for k, zone in enumerate(constraints.keep_out):
+        label = "keep-out zones" if k == 0 else None
+        if isinstance(zone, KeepOutDisc):
+            ax.add_patch(Circle(tuple(zone.center), zone.radius, label=label, **style))
+        else:
+            ax.add_patch(Polygon(np.asarray(zone.polygon), closed=True, label=label, **style))
+    if constraints.workspace is not None:
+        w = constraints.workspace
+        ax.add_patch(
+            Rectangle(
+                (w.x[0], w.y[0]), w.x[1] - w.x[0], w.y[1] - w.y[0], fill=False, ls="--", ec="k", label="workspace"
+            )
+        )
+
+
 def _constraint_corners(problem: Any) -> np.ndarray:
     """Points (M, 2) that the drawn zones and workspace reach: the shaded plane covers them."""
     c = problem.constraints
@@ -54,7 +77,7 @@ def _constraint_corners(problem: Any) -> np.ndarray:
         return np.zeros((0, 2))
     points = []
     for zone in c.keep_out:
-        if hasattr(zone, "radius"):
+        if isinstance(zone, KeepOutDisc):
             points += [np.asarray(zone.center) + zone.radius * np.array(d) for d in ((-1, -1), (1, 1))]
         else:
             points += [np.asarray(v, float) for v in zone.polygon]
