@@ -28,13 +28,19 @@ def plot_variance_maps(solution: Solution):  # noqa: ANN201  (matplotlib Figure)
     (x0, x1), (y0, y1) = spec.extent
     nx, ny = spec.grid
     xe, ye = np.linspace(x0, x1, nx + 1), np.linspace(y0, y1, ny + 1)
-    diag = np.diagonal(solution.Sigma, axis1=1, axis2=2)
+    diag = solution.variances()
     t, p = solution.t, solution.p
     panels = [(f"t = {t[0]:g}: prior", diag[0], False), (f"t = {t[-1]:g}: optimal paths", diag[-1], True)]
     if "sigma_diag_tf" in solution.baseline:
         panels.append((f"t = {t[-1]:g}: no control", np.asarray(solution.baseline["sigma_diag_tf"]), False))
     vmax = float(diag.max())
-    fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 4.4), layout="constrained", squeeze=False)
+    # one frame for every panel: the field and the paths (which may leave it), so the panels are drawn alike
+    xs, ys = np.r_[x0, x1, p[..., 0].ravel()], np.r_[y0, y1, p[..., 1].ravel()]
+    pad = 0.02 * max(np.ptp(xs), np.ptp(ys))
+    xlim, ylim = (xs.min() - pad, xs.max() + pad), (ys.min() - pad, ys.max() + pad)
+    height = float(np.clip(4.0 * np.ptp(ylim) / np.ptp(xlim), 2.0, 6.0)) + 1.0  # titles and x label: 1 inch
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), height), layout="constrained",
+                             squeeze=False, sharex=True, sharey=True)  # fmt: skip
     length, variance = _label(solution, length=1), _label(solution, state=2)
     for ax, (title, values, paths) in zip(axes[0], panels, strict=True):
         mesh = ax.pcolormesh(xe, ye, field.to_grid(values), vmin=0.0, vmax=vmax, cmap="viridis", shading="flat")
@@ -46,7 +52,7 @@ def plot_variance_maps(solution: Solution):  # noqa: ANN201  (matplotlib Figure)
                 ax.plot(p[-1, i, 0], p[-1, i, 1], "w^", ms=7, mec="k", zorder=3)
                 ax.annotate(sensor.name, p[-1, i], color="w", fontsize=8, xytext=(4, 4), textcoords="offset points")
         ax.set(title=f"{title}\nTr Σ = {values.sum():.4g} {variance}", xlabel=f"x ({length})",
-               ylabel=f"y ({length})", aspect="equal")  # fmt: skip
+               ylabel=f"y ({length})", xlim=xlim, ylim=ylim, aspect="equal")  # fmt: skip
     fig.colorbar(mesh, ax=axes[0].tolist(), label=f"error variance diag Σ ({variance})")
     return fig
 
@@ -58,7 +64,7 @@ def plot_trace(solution: Solution):  # noqa: ANN201
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     if "trace_Sigma" in solution.baseline:
         ax.plot(solution.t, solution.baseline["trace_Sigma"], "--", color="0.35", label="no control (u ≡ 0)")
-    ax.plot(solution.t, np.trace(solution.Sigma, axis1=1, axis2=2), lw=2, label="optimal paths")
+    ax.plot(solution.t, solution.variances().sum(axis=1), lw=2, label="optimal paths")
     ax.set(xlabel=f"time ({_label(solution, time=1)})", ylabel=f"Tr Σ(t) ({_label(solution, state=2)})",
            title="total error variance of the field", ylim=(0, None))  # fmt: skip
     ax.legend()

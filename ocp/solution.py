@@ -56,7 +56,8 @@ class HomotopyStep:
 class Solution:
     """A solved (or partially solved) mobile-sensor Kalman problem.
 
-    Arrays: ``t`` (T,) state times; ``Sigma`` (T, n, n) (None if loaded from a file written without it);
+    Arrays: ``t`` (T,) state times; ``Sigma`` (T, n, n) (None if loaded from a file written without it, a field
+    solution of more than 25 states: then ``sigma_diag`` (T, n) holds its diagonal, see :meth:`variances`);
     ``p``, ``v`` (T, N, 2); ``t_u`` (Tu,) control times;
     ``u`` (Tu, N, 2); optional costates on ``t_costate`` (Tc,): ``Lam`` (Tc, n, n), ``lam_p``, ``lam_v``
     (Tc, N, 2) — the PMP costates of J at ε = ``eps`` (Λ is the symmetric matrix costate of Σ).
@@ -90,6 +91,8 @@ class Solution:
     nlp: dict[str, Any] | None = None
     #: (scheme, degree, intervals) when the states are collocation polynomials on a uniform grid
     collocation: tuple[str, int, int] | None = None
+    #: diag Σ(t), shape (T, n), read from a file that holds no full Σ (``Sigma`` is None then)
+    sigma_diag: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.status = SolveStatus(self.status)
@@ -204,12 +207,26 @@ class Solution:
             return float(self.stats["min_sigma_eigenvalue"])
         return float(np.linalg.eigvalsh(self.Sigma).min())
 
+    def variances(self) -> np.ndarray:
+        """The error variances diag Σ(t) on the state times ``t``, shape (T, n) (units: state²).
+
+        From ``Sigma``, or from ``sigma_diag`` when the solution was loaded from a file that keeps only the
+        diagonal (a field solution of more than 25 states, ``solver.shooting.full_sigma``).
+        """
+        if self.Sigma is not None:
+            return np.diagonal(self.Sigma, axis1=1, axis2=2)
+        if self.sigma_diag is None:
+            raise ValueError("this solution holds neither Σ(t) nor its diagonal")
+        return self.sigma_diag
+
     def non_finite(self) -> str | None:
         """What is NaN or infinite in the solution (cost, Σ, p, v, u), or ``None`` if everything is finite."""
         for name in ("terminal_cost", "running_cost", "control_energy"):
             if not np.isfinite(getattr(self, name)):
                 return f"the {name.replace('_', ' ')} is {getattr(self, name)}"
         for name in ("Sigma", "p", "v", "u"):
+            if getattr(self, name) is None:  # Σ of a file that keeps its diagonal only
+                continue
             values = np.asarray(getattr(self, name))
             if not np.all(np.isfinite(values)):
                 return f"{name} has {int(np.size(values) - np.isfinite(values).sum())} NaN or infinite values"

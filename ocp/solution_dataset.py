@@ -122,8 +122,9 @@ def solution_content(solution: Any) -> DatasetContent:
     if s.problem.process.field is not None:
         locations = s.problem.process.field.process().locations
         coords.update(state=np.arange(n), state_x=locations[:, 0], state_y=locations[:, 1])
-        arrays["sigma_diag"] = np.diagonal(s.Sigma, axis1=1, axis2=2)
-        if not s.stats.get("full_sigma", True):  # solver.shooting.full_sigma (default: n <= 25)
+        arrays["sigma_diag"] = s.variances()
+        # solver.shooting.full_sigma (default: n <= 25); a solution loaded from such a file has no Σ to write
+        if s.Sigma is None or not s.stats.get("full_sigma", True):
             del arrays["Sigma"], coords["row"], coords["col"]
     if s.Lam is not None:
         coords["time_costate"] = s.t_costate
@@ -157,6 +158,8 @@ def solution_content(solution: Any) -> DatasetContent:
         attrs = _attrs(system, name)
         if s.method == "shooting" and name in _SHOOTING_TIMES:  # no collocation points (docs/theory/field.md §3)
             attrs["long_name"] = _SHOOTING_TIMES[name]
+        if name in ("row", "col") and "Lam" not in arrays:  # no costates in this file
+            attrs["long_name"] = attrs["long_name"].replace(" and Λ", "")
         content.add_coord(name, _AUXILIARY.get(name, (name,)), values, attrs)
     return content
 
@@ -322,7 +325,7 @@ def check_values(fields: dict[str, Any], source: str = "solution.nc") -> None:
     for name in ("terminal_cost", "running_cost", "control_energy"):
         if not abs(fields[name]) <= MAX_MAGNITUDE:
             raise _fail(source, name, f"a magnitude at most {MAX_MAGNITUDE:g} (status: solved)", f"{fields[name]:g}")
-    for name in ("Sigma", "p", "v", "u"):
+    for name in ("Sigma", "sigma_diag", "p", "v", "u"):
         if fields[name] is not None:
             _finite(fields[name], name, source, bound=True)
 
@@ -374,6 +377,7 @@ def solution_fields(ds: Any, source: str = "solution.nc", problem: Any = None) -
         "baseline": _json(ds, "baseline_json", source, dict),
         "stats": _json(ds, "stats_json", source, dict),
         "collocation": _collocation(ds, source),
+        "sigma_diag": _values(ds, "sigma_diag") if "Sigma" not in ds and "sigma_diag" in ds else None,
         "nlp": None
         if "nlp_w" not in ds
         else {

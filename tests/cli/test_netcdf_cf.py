@@ -134,3 +134,14 @@ def test_the_cf_checker_finds_no_error_or_warning(written, tmp_path):
             f.attrs["Conventions"] = "CF-1.8"
         report = subprocess.run([checker, "-v", "1.8", *tables, str(copy)], capture_output=True, text=True)
         assert "ERRORS detected: 0" in report.stdout and "WARNINGS given: 0" in report.stdout, (name, report.stdout)
+
+
+@pytest.mark.slow
+def test_index_coordinates_name_the_costates_only_where_the_file_has_them(written, tmp_path):
+    with xr.open_dataset(written["solution.nc"], engine="h5netcdf") as ds:  # direct: Σ and its costate Λ
+        assert "Lam" in ds and ds["row"].attrs["long_name"] == "row index of Σ and Λ (process state)"
+    short_runs.field_solution().save(tmp_path)  # shooting: Σ (n ≤ 25 keeps it whole), no costates
+    with xr.open_dataset(tmp_path / "solution.nc", engine="h5netcdf") as ds:
+        assert "Lam" not in ds and "Sigma" in ds
+        assert ds["row"].attrs["long_name"] == "row index of Σ (process state)"
+        assert ds["col"].attrs["long_name"] == "column index of Σ (process state)"

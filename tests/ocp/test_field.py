@@ -375,6 +375,52 @@ def test_sampling_a_shooting_solution_gives_its_own_piecewise_linear_controls_an
     np.testing.assert_allclose(sample.v[:, 0], flown.y[2:].T, atol=1e-9)
 
 
+def test_a_loaded_field_solution_without_its_full_sigma_keeps_its_variances_plots_and_saves_again(tmp_path):
+    # a field file of more than 25 states keeps diag Σ only: it was written but not read back, so the loaded
+    # solution could neither draw variance_maps.png nor be saved again (np.diagonal of None)
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from short_runs import field_solution
+
+    from mobisense.ocp.field_plots import FIELD_FIGURES
+
+    solution = field_solution(shooting={"full_sigma": False})
+    solution.save(tmp_path / "first")
+    loaded = ms.Solution.load(tmp_path / "first")
+    assert loaded.Sigma is None
+    # the file's float64 diagonal, bit for bit
+    np.testing.assert_array_equal(loaded.variances(), np.diagonal(solution.Sigma, axis1=1, axis2=2))
+    for draw in FIELD_FIGURES.values():
+        plt.close(draw(loaded))
+    loaded.save(tmp_path / "again")
+    np.testing.assert_array_equal(ms.Solution.load(tmp_path / "again").variances(), loaded.variances())
+    assert loaded.non_finite() is None
+
+
+def test_variance_maps_draw_every_panel_on_the_same_frame_around_field_and_paths():
+    # the middle panel (the paths) was autoscaled to paths leaving the field, and came out smaller than the others
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from short_runs import field_solution
+
+    from mobisense.ocp.field_plots import plot_variance_maps
+
+    solution = field_solution()
+    fig = plot_variance_maps(solution)
+    frames = {(ax.get_xlim(), ax.get_ylim()) for ax in fig.axes[:-1]}  # the last axes: the colour bar
+    assert len(frames) == 1
+    (x0, x1), (y0, y1) = frames.pop()
+    (ex0, ex1), (ey0, ey1) = solution.problem.process.field.extent
+    p = solution.p
+    assert x0 < min(ex0, p[..., 0].min()) and x1 > max(ex1, p[..., 0].max())
+    assert y0 < min(ey0, p[..., 1].min()) and y1 > max(ey1, p[..., 1].max())
+    plt.close(fig)
+
+
 @pytest.mark.slow
 def test_random_coarse_starts_find_the_lower_optimum_the_homotopy_misses_on_a_small_field():
     # one sensor on a 3 × 3 field: the homotopy's basin J = 0.5908834; a random ε = 1 start 0.5532824, also
