@@ -21,6 +21,8 @@ __getattr__, __dir__, __all__ = lazy_exports(
         "solution_sensitivities": "mobisense.ocp.direct.sensitivities",
         "resimulate_sensors": "mobisense.ocp.direct.path_report",
         "watch_iterations": "mobisense.ocp.direct.iteration_limit",
+        "worst_violation": "mobisense.ocp.direct.violations",
+        "constraint_rows": "mobisense.ocp.direct.violations",
         "IpoptIteration": "mobisense.ocp.direct.iteration_limit",
     },
 )

@@ -23,6 +23,7 @@ from .path_report import constraint_report
 from .stiff_start import coarse_grid_hint
 from .strategy import Continuation, SolveContext, run_strategy, solve_labelled
 from .transcription import DirectCollocation, NLPResult, transcription_for
+from .violations import worst_violation
 
 __all__ = ["solve_direct", "solve_starts"]
 
@@ -30,15 +31,6 @@ __all__ = ["solve_direct", "solve_starts"]
 #: largest scaled constraint violation of a failed solve not blamed on a constraint (Ipopt stopped for another
 #: reason, e.g. its iteration limit, with the dynamics and path constraints satisfied)
 FEASIBLE_VIOLATION = 1e-6
-
-
-def _worst_violation(tr: DirectCollocation, result: NLPResult, problem: Problem) -> dict[str, Any]:
-    _, _, lbg, ubg = tr.bounds()
-    violation = np.maximum(np.maximum(lbg - result.g, result.g - ubg), 0.0)
-    index = int(np.argmax(violation))
-    labels = tr.constraint_labels([s.name for s in problem.sensors], problem.horizon.t0, problem.horizon.tf)
-    what, when = labels[index]
-    return {"constraint": what, "time": when, "violation": float(violation[index])}
 
 
 def solve_direct(
@@ -108,14 +100,16 @@ def solve_direct(
     if "strategy" in stats and len(stats["strategy"]["starts"]) > 1:
         message += f" ({kept.label} kept, the best of {len(stats['strategy']['starts'])} starts)"
     if not solved and kept.failed is not None:
-        worst = _worst_violation(tr, kept.failed, problem)
+        worst = worst_violation(tr, kept.failed.g, kept.parameters(1.0), problem)
         stats["worst_violation"] = worst
         where = f"{worst['constraint']} at t = {worst['time']:.4g}"
+        size = f"{worst['violation']:.3g} {worst['units']}".removesuffix(" 1")
         message = f"Ipopt returned {kept.failed.status} at ε = {kept.steps[-1].eps:g}; last ε solved = {kept.eps:g}; "
-        if worst["violation"] <= FEASIBLE_VIOLATION:  # not a constraint's doing: the optimality conditions
-            message += f"every constraint holds to {worst['violation']:.3g} (the largest: {where}): not optimal yet"
+        if worst["scaled_violation"] <= FEASIBLE_VIOLATION:  # not a constraint's doing: the optimality conditions
+            held = f"{worst['scaled_violation']:.3g} in the NLP's scaling (the largest: {where}, {size})"
+            message += f"every constraint holds to {held}: not optimal yet"
         else:
-            message += f"worst-violated constraint: {where} (violation {worst['violation']:.3g})"
+            message += f"worst-violated constraint: {where} (violation {size})"
         hint = coarse_grid_hint(tr, coasting, kept.parameters(1.0), problem.horizon.t0, problem.horizon.tf)
         if hint:
             message += f"; {hint}"

@@ -427,27 +427,6 @@ class DirectCollocation:
         nu_init = -(c.D[0, :] @ nu[0]) + c.E[0] * mu0
         return np.vstack([-scale * nu_init / x_scale, lam_nodes])
 
-    def constraint_labels(self, sensor_names: list[str], t0: float, tf: float) -> list[tuple[str, float]]:
-        """(description, time) of every NLP constraint, in problem terms."""
-        s, k, d, K = self.structure, self.kernels, self.colloc.degree, self.intervals
-        state = s.state.labels(sensor_names)
-        starts, nodes = self.times(t0, tf)
-        bounded = [i for i in range(s.N) if s.bounded_control[i]]
-        labels: list[tuple[str, float]] = []
-        for j in range(K):
-            labels += [(f"continuity of {name}", float(starts[j + 1])) for name in state[-k.nn :]]
-            for r in range(d):
-                labels += [(f"dynamics of {name} (collocation)", float(nodes[j, r])) for name in state[: k.ns]]
-            hull = len(self.colloc.bernstein)  # Bernstein coefficient r sits at τ = r / (hull − 1)
-            for r in range(hull):
-                at = float(starts[j] + (starts[j + 1] - starts[j]) * r / max(hull - 1, 1))
-                labels += [(f"|u| ≤ u_max of sensor {sensor_names[i]} (Bernstein coefficient {r + 1})", at)
-                           for i in bounded]  # fmt: skip
-            for r in range(d):
-                labels += [(what.format(*sensor_names), float(nodes[j, r])) for _, what in self.model.path_labels]
-        labels += [(f"{kind} of sensor {sensor_names[i]}", float(starts[-1])) for kind, i in k.terminal_labels]
-        return labels
-
 
 @lru_cache(maxsize=16)
 def _cached_transcription(

@@ -195,7 +195,7 @@ def test_a_failure_with_every_constraint_satisfied_does_not_blame_one() -> None:
     solution = ms.solve(ms.Problem.from_dict(hussein2008(max_iterations=5, collocation={"intervals": 30})))
     assert solution.status == "failed" and "Maximum_Iterations_Exceeded" in solution.message
     assert "every constraint holds to" in solution.message and "worst-violated" not in solution.message
-    assert solution.stats["worst_violation"]["violation"] <= 1e-6
+    assert solution.stats["worst_violation"]["scaled_violation"] <= 1e-6
 
 
 def test_solver_failure_keeps_results_and_names_the_constraint(tmp_path, capsys):
