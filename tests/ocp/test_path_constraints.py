@@ -9,7 +9,7 @@ from reference_problems import PROBLEMS
 
 from mobisense import cli
 from mobisense.core.errors import ConfigError
-from mobisense.ocp.direct.path_report import resimulate_sensors
+from mobisense.ocp.direct.path_report import FlownPath, refine_maximum, resimulate_sensors
 from mobisense.ocp.direct.solver import solve_direct
 from mobisense.ocp.path_constraints import PathConstraints, margins
 from mobisense.ocp.problem import Problem
@@ -58,6 +58,51 @@ def test_resimulation_is_exact_for_a_constant_control() -> None:
     # double integrator under a constant control: p = p0 + v0 t + u t²/2 (rounding only)
     np.testing.assert_allclose(p[:, 0], p0 + np.outer(t, v0) + 0.5 * np.outer(t**2, [0.3, -0.2]), atol=1e-12)
     np.testing.assert_allclose(v[:, 0], v0 + np.outer(t, [0.3, -0.2]), atol=1e-12)
+
+
+def test_the_flown_path_at_any_time_is_scipys_integration_of_the_control_polynomials() -> None:
+    # independent: the Lagrange polynomial through each interval's 3 Radau control nodes, flown by DOP853
+    from scipy.integrate import solve_ivp
+
+    from mobisense.ocp.collocation import CollocationScheme
+
+    problem = Problem.from_dict(base())
+    K, d = 5, 3
+    u = np.random.default_rng(2).normal(size=(K, d, 1, 2))
+    tau = CollocationScheme("radau", d).tau[1:]
+
+    def control(t: float) -> np.ndarray:
+        k = min(int(t // 2.0), K - 1)
+        s = t / 2.0 - k
+        weights = [np.prod([(s - tau[m]) / (tau[j] - tau[m]) for m in range(d) if m != j]) for j in range(d)]
+        return np.einsum("j,jc->c", weights, u[k, :, 0])
+
+    times = np.sort(np.random.default_rng(3).uniform(0.0, 10.0, 50))
+    flown = solve_ivp(lambda t, y: np.r_[y[2:], control(t)], (0.0, 10.0), [10.0, 10.0, 0.0, -2.0], method="DOP853",
+                      t_eval=times, rtol=1e-12, atol=1e-12, max_step=0.5)  # fmt: skip
+    p, v = FlownPath(problem, u, "radau", d).at(times)
+    np.testing.assert_allclose(p[:, 0], flown.y[:2].T, atol=1e-9)  # DOP853 at 1e-12 over 10 time units
+    np.testing.assert_allclose(v[:, 0], flown.y[2:].T, atol=1e-9)
+
+
+def test_the_largest_violation_is_refined_between_the_samples_to_a_kink() -> None:
+    # a tent peaking between two samples (a path grazing a corner): the samples miss it by 0.4 of a step
+    peak_at, step = 0.123456789, 0.05
+    t = np.arange(0.0, 1.0 + step / 2, step)
+
+    def tent(x: np.ndarray) -> np.ndarray:
+        return 1.0 - np.abs(np.asarray(x) - peak_at)
+
+    value, when = refine_maximum(tent, t, tent(t))
+    assert tent(t).max() < 1.0 - 0.02
+    assert value == pytest.approx(1.0, abs=1e-9) and when == pytest.approx(peak_at, abs=1e-9)
+    # two peaks, the lower sample belonging to the higher one: the candidates are searched, not only the largest sample
+    def two(x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x)
+        return np.maximum(0.9 - 5 * np.abs(x - 0.30), 1.0 - 40 * np.abs(x - 0.7243))
+
+    assert two(t).argmax() == 6 and refine_maximum(two, t, two(t))[0] == pytest.approx(1.0, abs=1e-8)
+
 
 
 @pytest.mark.parametrize(
