@@ -361,6 +361,13 @@ class SweepCommand:
         elif args.no_plot:  # an earlier run's cost.png shows fewer tasks than the results now hold
             (result.folder / "cost.png").unlink(missing_ok=True)
         counts = result.summary["counts"]
+        if counts.get("warned"):
+            first = result.summary["first_warning"]
+            print(
+                f"mobisense: warning: {counts['warned']} of {counts['solved']} solved tasks have warnings (column "
+                f"'warning' of results.parquet); task #{first['index']}: {first['warning']}",
+                file=sys.stderr,
+            )
         unsolved = counts["failed"] + counts["error"]
         if unsolved:  # like solve: exit 1 when a solve did not converge; every row, and why, is in the results
             print(

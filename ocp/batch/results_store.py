@@ -42,9 +42,10 @@ _TYPES = {
     "start": "string",
     "transcription_cached": "bool",
     "solution_file": "string",
+    "warning": "string",
 }
 #: columns added after the first release of the format (read as missing from older fragments)
-_LATER = ("solution_file",)
+_LATER = ("solution_file", "warning")
 
 
 def _number(x: Any) -> bool:

@@ -65,6 +65,7 @@ RESULT_COLUMNS = [
     "start",
     "transcription_cached",
     "solution_file",
+    "warning",
 ]
 
 

@@ -75,13 +75,14 @@ def _median(values: list[float]) -> float | None:
 
 
 def sweep_summary(spec: SweepSpec, tasks: list[SweepTask], rows: list[dict[str, Any]], resumed: int) -> dict[str, Any]:
-    """Counts, the best solved task and the warm-start saving (median solve time/iterations)."""
+    """Counts, the best solved task, the first task with warnings and the warm-start saving (medians)."""
     statuses = [r["status"] for r in rows]
     solved = [r for r in rows if r["status"] == "solved"]
     best = min(solved, key=lambda r: r["cost"]) if solved else None
     warm = [r for r in solved if r.get("start") == StartKind.WARM.value]
     cold_starts = (StartKind.CONTINUATION.value, StartKind.WARM_FAILED.value, StartKind.COARSE.value)
     cold = [r for r in solved if r.get("start") in cold_starts]
+    warned = sorted((r for r in solved if r.get("warning")), key=lambda r: r["index"])
     return {
         "mode": spec.mode,
         "vary": list(spec.vary),
@@ -91,7 +92,9 @@ def sweep_summary(spec: SweepSpec, tasks: list[SweepTask], rows: list[dict[str, 
             "failed": statuses.count("failed"),
             "error": sum(s not in ("solved", "failed") for s in statuses),
             "resumed": resumed,
+            "warned": len(warned),
         },
+        "first_warning": {"index": int(warned[0]["index"]), "warning": warned[0]["warning"]} if warned else None,
         "best": None
         if best is None
         else {

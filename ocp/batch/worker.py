@@ -12,7 +12,15 @@ from __future__ import annotations
 import time
 from typing import Any
 
-__all__ = ["solve_task", "solve_start_share", "shareable_starts", "task_problem", "worker_name", "dask_setup"]
+__all__ = [
+    "solve_task",
+    "task_warnings",
+    "solve_start_share",
+    "shareable_starts",
+    "task_problem",
+    "worker_name",
+    "dask_setup",
+]
 
 
 def solve_task(payload: dict[str, Any]) -> dict[str, Any]:
@@ -52,9 +60,28 @@ def solve_task(payload: dict[str, Any]) -> dict[str, Any]:
         "error": "" if solution.success else solution.message,
         "start": StartKind(solution.stats.get("start", StartKind.CONTINUATION)).value,
         "transcription_cached": cached,
+        "warning": task_warnings(solution),
     }
     # the solution.nc content as numpy arrays (no xarray on the worker; cheaper to pickle than a Dataset)
     return {"row": row, "dataset": solution.to_content(), "nlp": solution.nlp if solution.success else None}
+
+
+def task_warnings(solution: Any) -> str:
+    """The warnings ``solve`` would print for this task's solution, joined by ``" | "`` (``""``: none, or failed).
+
+    :func:`~mobisense.ocp.solution_warnings.solution_warnings`; a failed task's ``error`` says why it failed.
+
+    A sweep task runs no plan check (a re-integration per task), so the grid warning of ``solve`` is not among
+    them, nor is the warning about an unused ``init`` (a sweep warm-starts from neighbours itself); a plan that
+    breaks a path constraint between the nodes, costs more than the no-control baseline or whose Σ(t) is not
+    positive definite is.
+    """
+    if not solution.success:
+        return ""
+    from ..solution_warnings import init_warning, solution_warnings
+
+    internal = init_warning(solution)  # the sweep's own warm start from a neighbour, not an init the user gave
+    return " | ".join(w for w in solution_warnings(solution, solution.min_sigma_eigenvalue) if w != internal)
 
 
 def solve_start_share(payload: dict[str, Any], share: int, shares: int) -> list[dict[str, Any]]:

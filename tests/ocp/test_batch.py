@@ -340,3 +340,51 @@ def test_an_unencrypted_remote_scheduler_is_warned_about_once_it_answers(monkeyp
             pass
     said = [r.getMessage() for r in caplog.records if r.name == "mobisense"]  # (dask logs its own)
     assert said == [f"{cluster.scheduler_address} is plain"]
+
+
+def test_a_sweep_reports_the_warnings_solve_would_print_for_each_task(tmp_path, capsys):
+    # a task whose plan breaks a path constraint between the nodes was a silent "solved" row; keep_out.yaml on
+    # K = 12 flies through the reef's corner (solve warns: 2.9 % of its size). The check here is independent:
+    # the task's controls flown by scipy and the depth into the convex polygon from its edges, maximised by scipy.
+    from reference_problems import PROBLEMS
+    from scipy.integrate import solve_ivp
+    from scipy.optimize import minimize_scalar
+
+    base = yaml.safe_load((PROBLEMS / "keep_out.yaml").read_text())
+    base["solver"]["collocation"]["intervals"] = 12
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump(base))
+    spec = {"base": "base.yaml", "mode": "grid", "vary": {"cost.alpha": [0.004, 0.0041]}}
+    (tmp_path / "sweep.yaml").write_text(yaml.safe_dump(spec))
+    out = tmp_path / "out"
+    assert cli.main(["sweep", str(tmp_path / "sweep.yaml"), "--out", str(out), "--workers", "1", "--quiet",
+                     "--no-plot"]) == 0  # fmt: skip
+    expected = "mobisense: warning: 2 of 2 solved tasks have warnings (column 'warning' of results.parquet); task #0: "
+    assert expected in capsys.readouterr().err
+    rows = pd.read_parquet(out / "results.parquet").sort_values("index")
+    assert json.loads((out / "summary.json").read_text())["counts"]["warned"] == 2
+    polygon = np.array(base["constraints"]["keep_out"][1]["polygon"], float)  # counter-clockwise
+    edges = [(a, np.array([b[1] - a[1], a[0] - b[0]]) / np.linalg.norm(b - a))  # (a vertex, outward normal)
+             for a, b in zip(polygon, np.roll(polygon, -1, axis=0), strict=True)]  # fmt: skip
+    x, y = polygon.T
+    size = np.sqrt(0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))  # √area (shoelace)
+    for _, row in rows.iterrows():
+        assert row["warning"].startswith("the plan's controls, flown, break ") and "keep_out[1] by " in row["warning"]
+        solution = Solution.load(out / row["solution_file"], task=int(row["index"]))
+        control = solution.sample  # the collocation's own control polynomials
+
+        flown = solve_ivp(lambda t, y, control=control: np.concatenate([y[2:], control(t).u[0, 0]]), (0.0, 10.0),
+                          np.r_[10.0, 10.0, 0.0, -2.0], rtol=1e-11, atol=1e-11, max_step=10.0 / 12 / 6,
+                          dense_output=True).sol  # fmt: skip
+
+        def depth(t, flown=flown):
+            return float(np.min([(a - flown(t)[:2]) @ n for a, n in edges]))  # > 0: inside every edge
+
+        times = np.linspace(0.0, 10.0, 2001)
+        peak = times[np.argmax([depth(t) for t in times])]
+        best = minimize_scalar(lambda t, depth=depth: -depth(t), bounds=(peak - 0.01, peak + 0.01),
+                               method="bounded", options={"xatol": 1e-10})  # fmt: skip
+        reported = solution.stats["constraints"]["keep_out[1]"]
+        assert -best.fun > 0.01 * size  # beyond the solve's PATH_TOLERANCE: 1 % of √area
+        # the report's refined maximum against scipy's (integration tolerance 1e-11, Brent to 1e-10 in t)
+        assert reported["max_violation"] == pytest.approx(-best.fun, rel=1e-6)
+        assert reported["max_violation_time"] == pytest.approx(best.x, abs=1e-6)
