@@ -342,7 +342,9 @@ def path_rows(
     return rows, scales, labels
 
 
-def margins(constraints: PathConstraints, p: np.ndarray, v: np.ndarray) -> dict[str, np.ndarray]:
+def margins(
+    constraints: PathConstraints, p: np.ndarray, v: np.ndarray, only: str | None = None
+) -> dict[str, np.ndarray]:
     """Exact physical violation of each constraint group at each time (> 0: violated), numpy.
 
     Parameters
@@ -350,6 +352,8 @@ def margins(constraints: PathConstraints, p: np.ndarray, v: np.ndarray) -> dict[
     constraints : PathConstraints
     p, v : ndarray, shape (T, N, 2)
         Positions (L) and velocities (L/T).
+    only : str, optional
+        One group's name (e.g. ``"keep_out[1]"``): only that group is computed.
 
     Returns
     -------
@@ -359,7 +363,13 @@ def margins(constraints: PathConstraints, p: np.ndarray, v: np.ndarray) -> dict[
     """
     out: dict[str, np.ndarray] = {}
     N = p.shape[1]
+
+    def wanted(name: str) -> bool:
+        return only is None or only == name
+
     for k, zone in enumerate(constraints.keep_out):
+        if not wanted(f"keep_out[{k}]"):
+            continue
         if isinstance(zone, KeepOutDisc):
             depth = zone.radius - np.linalg.norm(p - np.asarray(zone.center), axis=2)
         else:
@@ -367,11 +377,11 @@ def margins(constraints: PathConstraints, p: np.ndarray, v: np.ndarray) -> dict[
             edges = _polygon_edges(Vx, len(Vx), zone.orientation)
             depth = -np.max([(p - a) @ n for a, n in edges], axis=0)
         out[f"keep_out[{k}]"] = depth.max(axis=1)
-    if constraints.min_separation is not None and N > 1:
+    if constraints.min_separation is not None and N > 1 and wanted("min_separation"):
         out["min_separation"] = constraints.min_separation - _closest_pairs(p)
-    if constraints.max_speed is not None:
+    if constraints.max_speed is not None and wanted("max_speed"):
         out["max_speed"] = np.linalg.norm(v, axis=2).max(axis=1) - constraints.max_speed
-    if constraints.workspace is not None:
+    if constraints.workspace is not None and wanted("workspace"):
         w = constraints.workspace
         outside = np.maximum.reduce([w.x[0] - p[..., 0], p[..., 0] - w.x[1], w.y[0] - p[..., 1], p[..., 1] - w.y[1]])
         out["workspace"] = outside.max(axis=1)

@@ -383,10 +383,10 @@ class Solution:
         return TrajectorySample(times, Sigma, p, v, u)
 
     def _sample_collocation(self, times: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        from .collocation import CollocationScheme
+        from .collocation import collocation_scheme
 
         scheme, degree, K = self.collocation  # type: ignore[misc]
-        colloc = CollocationScheme(scheme, degree)
+        colloc = collocation_scheme(scheme, degree)
         t0, tf = float(self.t[0]), float(self.t[-1])
         node_times = t0 + (tf - t0) / K * (np.arange(K)[:, None] + colloc.tau[None, :])  # (K, d+1)
         tol = 1e-9 * abs(tf - t0) / K + 8 * np.finfo(float).eps * max(abs(t0), abs(tf))

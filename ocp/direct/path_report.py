@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.polynomial import polynomial as npoly
 
-from ..collocation import CollocationScheme
+from ..collocation import collocation_scheme
 from ..path_constraints import group_names, margins
 from ..problem import Problem
 
@@ -50,22 +50,24 @@ class FlownPath:
         self.K = self.u.shape[0]
         self.t0, tf = problem.horizon.t0, problem.horizon.tf
         self.h = (tf - self.t0) / self.K
-        tau = CollocationScheme(scheme, degree).tau[1:]
+        tau = collocation_scheme(scheme, degree).tau[1:]
         basis = np.linalg.inv(np.vander(tau, degree, increasing=True)).T  # row j: coefficients of ℓ_j
-        self.I1 = [npoly.polyint(c) for c in basis]  # ∫_0^τ ℓ_j
-        self.I2 = [npoly.polyint(c) for c in self.I1]  # ∫_0^τ ∫_0^s ℓ_j
-        p = [np.asarray([sensor.p0 for sensor in problem.sensors], float)]
-        v = [np.asarray([sensor.v0 for sensor in problem.sensors], float)]
-        for k in range(self.K):  # the interval starts, each flown from the one before
-            pk, vk = self._within(np.array([k]), np.array([1.0]), p[-1][None], v[-1][None])
-            p.append(pk[0])
-            v.append(vk[0])
-        self.p_start, self.v_start = np.array(p), np.array(v)  # (K + 1, N, 2)
+        # monomial coefficients (rows j, increasing powers up to d + 1) of ∫_0^τ ℓ_j and ∫_0^τ ∫_0^s ℓ_j
+        self.I1 = np.array([np.r_[npoly.polyint(c), 0.0] for c in basis])
+        self.I2 = np.array([npoly.polyint(npoly.polyint(c)) for c in basis])
+        # the interval starts, each flown from the one before: v_{k+1} = v_k + h Σ_j u_kj ∫_0^1 ℓ_j and
+        # p_{k+1} = p_k + h v_k + h² Σ_j u_kj ∫_0^1 ∫_0^s ℓ_j
+        dv = self.h * np.einsum("j,kjnc->knc", self.I1.sum(axis=1), self.u)
+        dp2 = self.h**2 * np.einsum("j,kjnc->knc", self.I2.sum(axis=1), self.u)
+        v0 = np.asarray([sensor.v0 for sensor in problem.sensors], float)
+        self.v_start = np.concatenate([v0[None], v0 + np.cumsum(dv, axis=0)])  # (K + 1, N, 2)
+        p0 = np.asarray([sensor.p0 for sensor in problem.sensors], float)
+        self.p_start = np.concatenate([p0[None], p0 + np.cumsum(self.h * self.v_start[:-1] + dp2, axis=0)])
 
     def _within(self, k: np.ndarray, s: np.ndarray, pk: np.ndarray, vk: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """p, v at fraction ``s`` ∈ [0, 1] of intervals ``k`` (T,) flown from (pk, vk) (T, N, 2)."""
-        W1 = np.array([npoly.polyval(s, c) for c in self.I1])  # (d, T)
-        W2 = np.array([npoly.polyval(s, c) for c in self.I2])
+        powers = np.vander(s, self.I2.shape[1], increasing=True).T  # (d + 2, T)
+        W1, W2 = self.I1 @ powers, self.I2 @ powers  # (d, T)
         u = self.u[k]  # (T, d, N, 2)
         v = vk + self.h * np.einsum("jt,tjnc->tnc", W1, u)
         p = pk + self.h * s[:, None, None] * vk + self.h**2 * np.einsum("jt,tjnc->tnc", W2, u)
@@ -113,25 +115,30 @@ def refine_maximum(f: Callable[[np.ndarray], np.ndarray], t: np.ndarray, values:
 
     ``values = f(t)`` on a grid ``t`` (sorted) may miss a peak between samples (a path grazing a polygon's corner:
     its depth has a kink there; sampled 20 times per interval, keep_out.yaml on K = 12 gave 0.047 for 0.061).
-    Around each of the ``candidates`` largest local maxima of the samples, the bracket of its two neighbours is
-    searched on 9 points and shrunk to the best point's neighbours, until it is 1e-9 of the whole span wide
-    (each round: a quarter of the bracket).
+    Around each of the ``candidates`` largest local maxima of the samples (those within twice the largest change
+    between neighbouring samples of the largest sample), the bracket of its two neighbours is
+    searched on 17 points and shrunk to the best point's neighbours, until it is 1e-9 of the whole span wide
+    (each round: an eighth of the bracket).
     """
     values = np.asarray(values, float)
     best = int(np.argmax(values))
     value, when = float(values[best]), float(t[best])
     padded = np.r_[-np.inf, values, -np.inf]
     peaks = np.flatnonzero((values >= padded[:-2]) & (values >= padded[2:]))  # local maxima of the samples
+    # a peak between two samples rises above them by about the change between neighbouring samples at most:
+    # lower local maxima cannot hold the largest value
+    rise = float(np.abs(np.diff(values)).max()) if len(values) > 1 else 0.0
+    peaks = peaks[values[peaks] >= value - 2.0 * rise]
     width = 1e-9 * max(float(t[-1] - t[0]), np.finfo(float).tiny)
     for i in peaks[np.argsort(values[peaks])[::-1][:candidates]]:
         lo, hi = float(t[max(i - 1, 0)]), float(t[min(i + 1, len(t) - 1)])
         while hi - lo > width:
-            grid = np.linspace(lo, hi, 9)
+            grid = np.linspace(lo, hi, 17)
             sampled = np.asarray(f(grid), float)
             j = int(np.argmax(sampled))
             if sampled[j] > value:
                 value, when = float(sampled[j]), float(grid[j])
-            lo, hi = grid[max(j - 1, 0)], grid[min(j + 1, 8)]
+            lo, hi = grid[max(j - 1, 0)], grid[min(j + 1, 16)]
     return value, when
 
 
@@ -190,8 +197,8 @@ def constraint_report(problem: Problem, tr: Any, result: Any, P: np.ndarray, u: 
     length, speed = system.of(length=1), system.of(length=1, time=-1)
     for name in group_names(tr.structure.path):
         mask = groups == name
-        largest, when = refine_maximum(lambda times, name=name: margins(constraints, *flown.at(times))[name], t,
-                                       violation[name])  # fmt: skip
+        largest, when = refine_maximum(lambda times, name=name: margins(constraints, *flown.at(times), only=name)[name],
+                                       t, violation[name])  # fmt: skip
         out[name] = {
             "active": _active(rows[:, mask], lam_nlp[:, mask]),
             "max_violation": largest,
