@@ -90,8 +90,8 @@ def _reference_problem(
         if solution is not None and solution.exists():
             return Solution.read_problem(solution, task), []
         if problem is not None and problem.exists():
-            p = load_problem(problem)
-            return p, problem_estimates(p, method="direct")
+            p = load_problem(problem)  # solved as the replay will: a field by shooting, anything else directly
+            return p, problem_estimates(p, method="shooting" if p.solver.method == "shooting" else "direct")
     except ConfigError as err:
         which = key if solution is not None and solution.exists() else key.replace("solution", "problem")
         raise ConfigError(f"{source}: {which}: {err}") from None
@@ -124,7 +124,8 @@ def _plan_replay(config: Any, source: Path) -> list[Estimate]:
     mc = config.monte_carlo
     steps = _steps(problem.horizon.tf - problem.horizon.t0, mc.time_step)
     n, N = problem.n, problem.N
-    floats = 3 * mc.runs * steps * n + 6 * steps * n * n + 8 * steps * N
+    # + Σ(t) re-integrated on the plan's nodes when the file keeps diag Σ only (at most as many as steps)
+    floats = 3 * mc.runs * steps * n + 7 * steps * n * n + 8 * steps * N
     what = f"the Monte Carlo validation: {mc.runs} runs × {steps:.3g} steps of {n} states"
     hint = "use fewer monte_carlo.runs or a larger monte_carlo.time_step"
     return parts + [Estimate(what, 8.0 * floats, hint, mc.runs * steps * n * 0.5e-6)]

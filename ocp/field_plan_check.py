@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["check_field_plan", "FIELD_CHECK_RTOL"]
+__all__ = ["check_field_plan", "plan_covariances", "FIELD_CHECK_RTOL"]
 
 #: relative tolerance of DOP853 (absolute: this times the largest prior variance); its own error on the
 #: 5 × 5 example is below 1e-11 relative (the same plan at rtol 1e-12 changes J by less)
@@ -29,6 +29,24 @@ def check_field_plan(solution: Any, rtol: float = FIELD_CHECK_RTOL) -> dict[str,
     ``relative_difference`` = (shooting J − re-integrated J) / |re-integrated J|; ``cost`` None (and
     ``integrator`` the reason) when the integration failed.
     """
+    report, _ = _integrate(solution, rtol)
+    return report
+
+
+def plan_covariances(solution: Any, rtol: float = FIELD_CHECK_RTOL) -> np.ndarray:
+    """Σ(t) of a shooting solution's plan at its nodes ``solution.t``, re-integrated, shape (T, n, n) (state²).
+
+    For a solution that keeps diag Σ only (a field of more than 25 states, ``solver.shooting.full_sigma``):
+    the same integration as :func:`check_field_plan`. ``RuntimeError`` with the integrator's message when it fails.
+    """
+    report, Sigma = _integrate(solution, rtol, keep=True)
+    if report["cost"] is None:
+        raise RuntimeError(report["integrator"])
+    return Sigma
+
+
+def _integrate(solution: Any, rtol: float, keep: bool = False) -> tuple[dict[str, Any], np.ndarray | None]:
+    """The plan check's report, and Σ at every node when ``keep`` (else None)."""
     from scipy.integrate import solve_ivp
 
     problem = solution.problem
@@ -56,13 +74,19 @@ def check_field_plan(solution: Any, rtol: float = FIELD_CHECK_RTOL) -> dict[str,
                         np.ravel([s.v0 for s in problem.sensors]), [0.0]])  # fmt: skip
     atol = np.concatenate([np.full(nn, rtol * float(np.max(np.diag(mats["Sigma0"])))), np.full(4 * N + 1, rtol)])
     t0 = time.perf_counter()
+    Sigma = np.empty((len(t_u), n, n)) if keep else None
+    if Sigma is not None:
+        Sigma[0] = mats["Sigma0"]
     for k in range(len(t_u) - 1):
         step = solve_ivp(rhs, (t_u[k], t_u[k + 1]), y, method="DOP853", rtol=rtol, atol=atol, args=(k,))
         if not step.success or not np.all(np.isfinite(step.y[:, -1])):
+            failure = f"DOP853 failed on [{t_u[k]:.4g}, {t_u[k + 1]:.4g}]: {step.message}"
             return {"cost": None, "relative_difference": None, "time_s": time.perf_counter() - t0,
-                    "integrator": f"DOP853 failed on [{t_u[k]:.4g}, {t_u[k + 1]:.4g}]: {step.message}"}  # fmt: skip
+                    "integrator": failure}, None  # fmt: skip
         y = step.y[:, -1]
+        if Sigma is not None:
+            Sigma[k + 1] = 0.5 * (y[:nn].reshape(n, n) + y[:nn].reshape(n, n).T)
     cost = float(np.sum(M * y[:nn].reshape(n, n))) + float(y[-1])
     difference = (solution.cost - cost) / abs(cost) if cost else None
     return {"cost": cost, "relative_difference": difference, "integrator": f"DOP853 (scipy, rtol {rtol:g})",
-            "time_s": time.perf_counter() - t0}  # fmt: skip
+            "time_s": time.perf_counter() - t0}, Sigma  # fmt: skip

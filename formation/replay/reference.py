@@ -44,6 +44,17 @@ def _read_solution(path: Path, task: int | None = None) -> tuple[Solution | None
         return None, f"{path} is not a solution file written by mobisense solve ({type(err).__name__}: {err})"
     if not solution.success:
         return None, f"{path} holds a failed solve ({solution.message})"
+    if solution.Sigma is None and solution.method == "shooting":
+        # a field of more than 25 states keeps diag Σ only; the Monte Carlo validation compares against the whole
+        # Σ(t): the plan's, re-integrated as the plan check does (DOP853, rtol 1e-10; docs/theory/replay.md §1.1)
+        from ...ocp.field_plan_check import plan_covariances
+
+        try:
+            solution.Sigma = plan_covariances(solution)
+        except RuntimeError as err:
+            why = f"the file keeps diag Σ only and the plan's Σ(t) could not be re-integrated ({err})"
+            return None, f"{path}: Sigma: {why}"
+        solution.stats["sigma_reintegrated"] = True
     if solution.Sigma is None:  # the Monte Carlo validation compares against Σ(t)
         return None, f"{path}: Sigma: expected the full error covariance Σ(t), got a file written without it"
     return solution, ""
@@ -66,14 +77,16 @@ def _check(
         if problem is None:
             raise ConfigError(f"{why}; give 'problem:' to solve it instead")
         return None, problem, why
+    rebuilt = "; Σ(t) re-integrated from its plan (the file keeps diag Σ only)" if solution.stats.get(
+        "sigma_reintegrated") else ""  # fmt: skip
     if problem is None:
-        return solution, None, f"loaded {solution_path} (not checked against a problem file: give 'problem:')"
+        return solution, None, f"loaded {solution_path} (not checked against a problem file: give 'problem:'){rebuilt}"
     stored, current = solution.problem.digest(), problem.digest()
     if stored != current:
         return None, problem, (
             f"{solution_path} is stale: it solves problem hash {stored}, {problem_path} has hash {current}"
         )
-    return solution, problem, f"loaded {solution_path} (problem hash {current} matches {problem_path})"
+    return solution, problem, f"loaded {solution_path} (problem hash {current} matches {problem_path}){rebuilt}"
 
 
 def reference_status(
@@ -118,16 +131,21 @@ def load_checked(
     RuntimeError
         The solver did not reach ε = 1.
     """
-    from ...ocp.direct.solver import solve_direct
-
     solution, problem, note = _check(solution_path, problem_path, task)
     if solution is not None:
         return solution, note, False
     assert problem is not None  # _check raises when there is neither
-    solution = solve_direct(problem)
+    if problem.solver.method == "shooting":  # a field problem: its own method (direct cannot hold it)
+        from ...ocp.field_solve import solve_shooting
+
+        solution, how = solve_shooting(problem), "by shooting"
+    else:
+        from ...ocp.direct.solver import solve_direct
+
+        solution, how = solve_direct(problem), "by direct collocation"
     if not solution.success:
         raise RuntimeError(f"solving {problem_path} failed: {solution.message}")
-    return solution, f"{note}: solved {problem_path} by direct collocation", True
+    return solution, f"{note}: solved {problem_path} {how}", True
 
 
 def load_or_solve(solution_path: Path, problem_path: Path | None) -> tuple[Solution, str]:

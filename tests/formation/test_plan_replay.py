@@ -270,3 +270,52 @@ def test_a_point_sensor_of_a_field_measures_where_it_flies_in_the_sampled_filter
     frozen = monte_carlo_filter(problem, times, np.broadcast_to(positions[:1], positions.shape), predicted, 20,
                                 np.random.default_rng(0))  # fmt: skip
     assert np.trace(M @ frozen.filter_covariance[-1]) > promised * (1 + 10 * abs(delivered / promised - 1))
+
+
+def test_a_field_plan_saved_with_diag_sigma_only_replays_against_its_reintegrated_sigma(tmp_path):
+    # a field of more than 25 states keeps diag Σ only (the shipped 10 × 10 example): its replay was refused
+    # ("expected the full error covariance Σ(t), got a file written without it"). Σ(t) is re-integrated from the
+    # plan by DOP853 (rtol 1e-10). The independent reference is the shooting's own Σ (Möbius-RK4, order 4): with
+    # 2 substeps per interval they differ by 1.4e-6, with 8 by 5.3e-9 (= 1.4e-6 / 4⁴, the RK4 error), so 1e-8.
+    from short_runs import field_solution
+
+    from mobisense.ocp.field_plan_check import plan_covariances
+
+    solution = field_solution(shooting={"full_sigma": False, "substeps": 8})
+    np.testing.assert_allclose(plan_covariances(solution), solution.Sigma, atol=1e-8, rtol=0)
+    import h5py
+
+    solution.save(tmp_path / "diag")
+    solution.stats["full_sigma"] = True  # the same plan written with its Σ, for the same replay
+    solution.save(tmp_path / "full")
+    for name, stored in (("diag", False), ("full", True)):
+        with h5py.File(tmp_path / name / "solution.nc", "r") as f:
+            assert ("Sigma" in f) is stored
+    summaries = {}
+    for name in ("diag", "full"):
+        scenario = tmp_path / f"{name}.yaml"
+        scenario.write_text(yaml.safe_dump({"name": name, "solution": f"{name}/solution.nc", "seed": 3,
+                                            "monte_carlo": {"runs": 20, "time_step": 0.05}}))  # fmt: skip
+        assert main(["replay", str(scenario), "--out", str(tmp_path / f"out_{name}"), "--no-plot"]) == 0
+        summaries[name] = json.loads((tmp_path / f"out_{name}" / "summary.json").read_text())
+    assert "Σ(t) re-integrated from its plan (the file keeps diag Σ only)" in summaries["diag"]["solution"]
+    assert "re-integrated" not in summaries["full"]["solution"]
+    diag, full = summaries["diag"]["monte_carlo"], summaries["full"]["monte_carlo"]
+    assert diag["terminal_cost_promised"] == pytest.approx(solution.terminal_cost, rel=1e-7)
+    for key, value in full.items():  # the same runs (seed 3) against Σ re-integrated or stored: the same numbers
+        assert diag[key] == pytest.approx(value, rel=1e-6), key
+
+
+@pytest.mark.slow
+def test_a_field_plan_missing_its_solution_is_solved_by_shooting_not_direct_collocation(tmp_path, capsys):
+    # replay with 'problem:' and no solution file estimated and ran a direct collocation of the field: the
+    # shipped 5 × 5 was refused as needing 330 GiB; a field is solved by its own method
+    from short_runs import field_problem
+
+    (tmp_path / "field.yaml").write_text(yaml.safe_dump(field_problem(shooting={"intervals": 20,
+                                                                                "coarse_intervals": 10})))  # fmt: skip
+    scenario = tmp_path / "replay.yaml"
+    scenario.write_text(yaml.safe_dump({"name": "r", "solution": "missing/solution.nc", "problem": "field.yaml",
+                                        "monte_carlo": {"runs": 10, "time_step": 0.1}}))  # fmt: skip
+    assert main(["replay", str(scenario), "--out", str(tmp_path / "out"), "--no-plot"]) == 0
+    assert "solved" in capsys.readouterr().out and "by shooting" in (tmp_path / "out" / "summary.json").read_text()
