@@ -320,6 +320,25 @@ def test_results_store_keeps_integers_beyond_two_to_the_53_among_floats(tmp_path
     assert row["cost.alpha"] == float(big) == 2.0**53 and row["sensors[0].p0"] == [2.0**53, 10.0]
 
 
+def test_results_written_before_the_later_columns_existed_read_with_them_empty(tmp_path):
+    """A sweep folder of an earlier version (no ``solution_file``, no ``warning`` column) resumes: its rows read
+    with those columns None, and new rows are appended beside them."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from mobisense.ocp.batch.results_store import ResultStore
+
+    store = ResultStore(tmp_path, {"cost.alpha": "float64"})
+    old = [f for f in store.schema if f.name not in ("solution_file", "warning")]
+    store.path.mkdir(parents=True)
+    row = {f.name: None for f in old} | {"task": "t0", "index": 0, "cost.alpha": 0.004, "status": "solved"}
+    pq.write_table(pa.Table.from_pylist([row], schema=pa.schema(old)), store.path / "part-000001.parquet")
+    store.append([{"task": "t1", "index": 1, "cost.alpha": 0.008, "status": "solved", "warning": "w"}])
+    rows = store.read()
+    assert rows["t0"]["warning"] is None and rows["t0"]["solution_file"] is None and rows["t0"]["cost.alpha"] == 0.004
+    assert rows["t1"]["warning"] == "w"
+
+
 def test_an_unencrypted_remote_scheduler_is_warned_about_once_it_answers(monkeypatch, caplog):
     """The warning about plain tcp:// to another host used to be printed while the options were checked, so an
     address that then failed to connect gave two lines; now open_client logs it after the scheduler answered."""
