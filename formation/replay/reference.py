@@ -30,7 +30,11 @@ __all__ = ["load_checked", "load_or_solve", "reference_status", "ReferenceTrajec
 
 
 def _read_solution(path: Path, task: int | None = None) -> tuple[Solution | None, str]:
-    """The solution in ``path`` (None and why if it cannot be used)."""
+    """The solution in ``path`` (None and why if it cannot be used).
+
+    A field solution that keeps diag Σ only is marked (``stats["sigma_reintegrated"]``): :func:`_with_sigma`
+    re-integrates its Σ(t) once it is known to be the one replayed.
+    """
     from ...core.errors import ConfigError
     from ...ocp.solution import Solution
 
@@ -44,24 +48,30 @@ def _read_solution(path: Path, task: int | None = None) -> tuple[Solution | None
         return None, f"{path} is not a solution file written by mobisense solve ({type(err).__name__}: {err})"
     if not solution.success:
         return None, f"{path} holds a failed solve ({solution.message})"
-    if solution.Sigma is None and solution.method == "shooting":
-        # a field of more than 25 states keeps diag Σ only; the Monte Carlo validation compares against the whole
-        # Σ(t): the plan's, re-integrated as the plan check does (DOP853, rtol 1e-10; docs/theory/replay.md §1.1)
-        from ...ocp.field_plan_check import plan_covariances
-
-        try:
-            solution.Sigma = plan_covariances(solution)
-        except RuntimeError as err:
-            why = f"the file keeps diag Σ only and the plan's Σ(t) could not be re-integrated ({err})"
-            return None, f"{path}: Sigma: {why}"
+    if solution.Sigma is None and solution.method == "shooting":  # a field of more than 25 states: diag Σ only
         solution.stats["sigma_reintegrated"] = True
-    if solution.Sigma is None:  # the Monte Carlo validation compares against Σ(t)
+    elif solution.Sigma is None:  # the Monte Carlo validation compares against Σ(t)
         return None, f"{path}: Sigma: expected the full error covariance Σ(t), got a file written without it"
     return solution, ""
 
 
+def _with_sigma(solution: Solution, path: Path) -> str:
+    """Re-integrate the Σ(t) of a field plan whose file keeps diag Σ only; why it failed, or ``""``.
+
+    The Monte Carlo validation compares against the whole Σ(t): the plan's, integrated as the plan check does
+    (DOP853, rtol 1e-10; docs/theory/replay.md §1.3).
+    """
+    from ...ocp.field_plan_check import plan_covariances
+
+    try:
+        solution.Sigma = plan_covariances(solution)
+    except RuntimeError as err:
+        return f"{path}: Sigma: the file keeps diag Σ only and the plan's Σ(t) could not be re-integrated ({err})"
+    return ""
+
+
 def _check(
-    solution_path: Path, problem_path: Path | None, task: int | None = None
+    solution_path: Path, problem_path: Path | None, task: int | None = None, rebuild: bool = True
 ) -> tuple[Solution | None, Problem | None, str]:
     """Solution (or None: solve first), the problem (if given) and what was found (see :func:`load_checked`)."""
     from ...core.config import ConfigError
@@ -73,20 +83,30 @@ def _check(
             raise ConfigError(f"{solution_path}: file not found (give 'problem:' to solve it first)")
         return None, problem, f"{solution_path} not found"
     solution, why = _read_solution(solution_path, task)
+    if solution is not None and problem is not None and solution.problem.digest() != problem.digest():
+        stored, current = solution.problem.digest(), problem.digest()
+        solution, why = (
+            None,
+            f"{solution_path} is stale: it solves problem hash {stored}, {problem_path} has hash {current}",
+        )
+    rebuilt = ""
+    if solution is not None and solution.stats.get("sigma_reintegrated"):
+        rebuilt = (
+            f"; Σ(t) {'re-integrated' if rebuild else 'to be re-integrated'} from its plan (the file keeps diag Σ only)"
+        )
+        if rebuild and (why := _with_sigma(solution, solution_path)):
+            solution = None
     if solution is None:
         if problem is None:
             raise ConfigError(f"{why}; give 'problem:' to solve it instead")
         return None, problem, why
-    rebuilt = "; Σ(t) re-integrated from its plan (the file keeps diag Σ only)" if solution.stats.get(
-        "sigma_reintegrated") else ""  # fmt: skip
     if problem is None:
         return solution, None, f"loaded {solution_path} (not checked against a problem file: give 'problem:'){rebuilt}"
-    stored, current = solution.problem.digest(), problem.digest()
-    if stored != current:
-        return None, problem, (
-            f"{solution_path} is stale: it solves problem hash {stored}, {problem_path} has hash {current}"
-        )
-    return solution, problem, f"loaded {solution_path} (problem hash {current} matches {problem_path}){rebuilt}"
+    return (
+        solution,
+        problem,
+        f"loaded {solution_path} (problem hash {problem.digest()} matches {problem_path}){rebuilt}",
+    )
 
 
 def reference_status(
@@ -97,16 +117,14 @@ def reference_status(
     With ``tracking`` (:class:`~mobisense.formation.replay.plan.TrackingGains`) its gains are also checked
     against the plan's horizon (``ConfigError`` naming ``source``), as the replay will.
     """
-    solution, problem, note = _check(solution_path, problem_path, task)
+    solution, problem, note = _check(solution_path, problem_path, task, rebuild=False)  # validate: nothing computed
     planned = solution.problem if solution is not None else problem
     if tracking is not None and planned is not None:
         tracking.check_horizon(planned.horizon.tf - planned.horizon.t0, source)
     return note if solution is not None else f"{note}: the replay solves {problem_path} first"
 
 
-def load_checked(
-    solution_path: Path, problem_path: Path | None, task: int | None = None
-) -> tuple[Solution, str, bool]:
+def load_checked(solution_path: Path, problem_path: Path | None, task: int | None = None) -> tuple[Solution, str, bool]:
     """The solution of ``solution_path`` if it is up to date with ``problem_path``, else ``problem_path`` solved.
 
     ``task`` picks one task of a sweep's ``tasks/part-NNNNNN.nc`` (its sweep index; see
@@ -180,9 +198,7 @@ class ReferenceTrajectory:
         self._position = CubicHermiteSpline(t, p, v, axis=0)
         self._velocity = self._position.derivative()
         u = np.asarray(u, float)
-        self._control = interp1d(
-            np.asarray(t_u, float), u, axis=0, bounds_error=False, fill_value=(u[0], u[-1])
-        )
+        self._control = interp1d(np.asarray(t_u, float), u, axis=0, bounds_error=False, fill_value=(u[0], u[-1]))
 
     @classmethod
     def from_solution(cls, solution: Solution) -> ReferenceTrajectory:
