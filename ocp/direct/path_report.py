@@ -93,11 +93,8 @@ def resimulate_sensors(
 
     Parameters
     ----------
-    problem : Problem
-    u : ndarray, shape (K, d, N, 2)
-        Controls at the collocation nodes (L/T²).
-    scheme, degree : str, int
-        The collocation scheme of ``u``.
+    problem, u, scheme, degree
+        As for :class:`FlownPath`.
     per_interval : int
         Sample times per interval (uniform in τ ∈ (0, 1]).
 
