@@ -12,7 +12,7 @@ whose fill stays within each interval's block.
 from __future__ import annotations
 
 from ..core.budget import PROCESS_BYTES, Estimate
-from .direct.nlp_size import transcription_size
+from .direct.nlp_size import path_rows_size, transcription_size
 from .homotopy import fixed_schedule
 from .model import Structure
 from .problem import Problem
@@ -55,12 +55,16 @@ def direct_estimate(problem: Problem, intervals: int | None = None) -> Estimate:
     need = solvers * (BYTES_PER_NODE * size.expression_nodes + BYTES_PER_NONZERO * nonzeros)
     iterations = 5 * _steps(problem)
     seconds = solvers * SECONDS_PER_NODE * size.expression_nodes + iterations * nonzeros * SECONDS_PER_NONZERO_ITERATION
+    structure = Structure.of(problem)
+    rows = path_rows_size(structure.path, problem.N, 4 + 2 * c.degree)[0]
+    paths = f", {rows} path-constraint rows per node" if rows else ""
     what = (
         f"the direct-collocation NLP ({size.variables:.3g} variables, {size.jacobian_nnz + size.hessian_nnz:.3g} "
         f"Jacobian and Hessian non-zeros: n = {problem.n} states, N = {problem.N} sensors, K = {K} intervals, "
-        f"d = {c.degree})"
+        f"d = {c.degree}{paths})"
     )
-    return Estimate(what, need + solution_bytes(problem), _SMALLER, seconds)
+    hint = _SMALLER + (", or fewer keep-out zones or polygon vertices (constraints)" if rows else "")
+    return Estimate(what, need + solution_bytes(problem), hint, seconds)
 
 
 def indirect_estimate(problem: Problem) -> Estimate:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 
 import pytest
+import yaml
 from reference_problems import hussein2008
 
 from mobisense.core.budget import Estimate, check_budget, default_memory_limit, parse_duration, parse_size
@@ -50,6 +51,50 @@ def test_transcription_size_matches_the_built_nlp():
     # for N = 1–3, Radau and Legendre)
     assert jacobian <= size.jacobian_nnz <= 1.5 * jacobian
     assert hessian <= size.hessian_nnz <= 1.5 * hessian
+
+
+def test_transcription_size_counts_every_kind_of_path_constraint():
+    # the path constraints were left out of the count: 50 sensors and 100 polygons of 64 vertices were taken for
+    # the unconstrained NLP's 3e6 non-zeros, and the build ran out of a 4 GB address space after 107 s (red team)
+    from mobisense.ocp.direct.nlp_size import transcription_size
+    from mobisense.ocp.direct.transcription import transcription_for
+    from mobisense.ocp.model import Structure
+    from mobisense.ocp.problem import Problem
+
+    data = hussein2008(collocation={"intervals": 4})
+    s0 = data["sensors"][0]
+    data["sensors"] = [{**s0, "name": f"s{i}", "p0": [20.0 + 3 * i, 20.0], "v0": [0.0, 0.0]} for i in range(3)]
+    data["constraints"] = {"keep_out": [{"center": [-30.0, -30.0], "radius": 1.0},
+                                        {"polygon": [[-20, -40], [-15, -40], [-15, -35], [-17, -33], [-20, -35]]}],
+                           "min_separation": 0.5, "max_speed": 50.0,
+                           "workspace": {"x": [-100, 100], "y": [-100, 100]}}  # fmt: skip
+    problem = Problem.from_dict(data)
+    tr = transcription_for(problem)
+    size = transcription_size(Structure.of(problem), 3, 4, "radau")
+    assert (size.variables, size.constraints) == (tr.nw, tr.ng)  # exact
+    solver = tr._solver(False).function
+    jacobian = solver.get_function("nlp_jac_g").sparsity_out(1).nnz()
+    hessian = solver.get_function("nlp_hess_l").sparsity_out(0).nnz()
+    assert jacobian <= size.jacobian_nnz <= 1.5 * jacobian  # measured +3 %
+    assert hessian <= size.hessian_nnz <= 1.5 * hessian
+
+
+def test_a_constrained_problem_too_large_to_build_is_refused_before_anything_is_allocated(tmp_path, capsys):
+    from mobisense import cli
+
+    data = hussein2008(collocation={"intervals": 20})
+    s0 = data["sensors"][0]
+    data["sensors"] = [{**s0, "name": f"s{i}", "p0": [20.0 + 3 * i, 20.0], "v0": [0.0, 0.0]} for i in range(50)]
+    square = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]
+    data["constraints"] = {"keep_out": [{"polygon": [[x - 60.0 + 3 * k, y - 60.0] for x, y in square]}
+                                        for k in range(100)], "min_separation": 0.5}  # fmt: skip
+    path = tmp_path / "p.yaml"
+    path.write_text(yaml.safe_dump(data))
+    out = tmp_path / "out"
+    code = cli.main(["solve", str(path), "--out", str(out), "--no-plot", "--quiet", "--max-memory", "2G"])
+    err = capsys.readouterr().err
+    assert code == 2 and "too large: the direct-collocation NLP" in err and "6225 path-constraint rows per node" in err
+    assert "fewer keep-out zones or polygon vertices" in err and not out.exists()
 
 
 def test_output_folder_checks(tmp_path):
