@@ -27,8 +27,21 @@ from pydantic import Field, model_validator
 from ..core.config import MAX_MAGNITUDE, MIN_MAGNITUDE, InvalidValue, PositiveFloat, StrictModel
 
 __all__ = [
-    "ShootingOptions","MAX_FIELD_STATES", "MAX_SUBSTEPS", "FieldKernel", "FieldSpec", "FieldProcess",
-           "shooting_substeps", "shooting_rate", "shooting_memory_bytes", "shooting_seconds"]
+    "ShootingOptions",
+    "MAX_FIELD_STATES",
+    "MAX_SUBSTEPS",
+    "FieldKernel",
+    "FieldSpec",
+    "FieldProcess",
+    "shooting_substeps",
+    "shooting_rate",
+    "shooting_memory_bytes",
+    "shooting_seconds",
+    "FINE_ITERATIONS",
+    "STEP_ITERATIONS",
+    "START_ITERATIONS",
+    "COARSE_H_LAMBDA",
+]
 
 #: The largest grid nx·ny accepted: Kₛ and every Σ are dense n × n (n = 2500: 50 MB per matrix).
 MAX_FIELD_STATES = 2500
@@ -84,14 +97,22 @@ def shooting_memory_bytes(n: int, intervals: int, substeps: int, sensors: int = 
 
 
 #: lower bounds of a shooting iteration's cost per RK4 substep: a fixed part (s), the flops of ~4 n × n products,
-#: and a part per pair of sensors (their N × N Gram and Woodbury blocks: 2.7e-6 s N² measured at N = 40 and 100)
-SECONDS_PER_SUBSTEP = 5e-5
-FLOPS_PER_SECOND = 2e10
+#: and a part per pair of sensors (their N × N Gram and Woodbury blocks: 2.7e-6 s N² measured at N = 40 and 100).
+#: Measured per substep and iteration: 2.7e-4 s at n = 25 (these give 2.3e-4), 3.5e-3 s at n = 100 (2.2e-3)
+SECONDS_PER_SUBSTEP = 2e-4
+FLOPS_PER_SECOND = 2e9
 SECONDS_PER_SENSOR_PAIR = 2e-6
+#: h·λ_max of the coarse phase's substeps (the ε-homotopy and random starts: a guide for the fine solve, not J)
+COARSE_H_LAMBDA = 2.0
+#: least Ipopt iterations of the fine solve, of a coarse ε step and of a random coarse start (measured on the 5 × 5,
+#: 7 × 4 and 10 × 10 fields: 25–31, 21–49 and 42–107)
+FINE_ITERATIONS, STEP_ITERATIONS, START_ITERATIONS = 20, 20, 40
 
 
-def shooting_seconds(n: int, intervals: int, substeps: int, sensors: int = 1) -> float:
-    """A lower estimate of a shooting solve's time (s): 10 iterations of K·m RK4 substeps.
+def shooting_seconds(
+    n: int, intervals: int, substeps: int, sensors: int = 1, iterations: int = FINE_ITERATIONS
+) -> float:
+    """A lower estimate of a shooting solve's time (s): ``iterations`` iterations of K·m RK4 substeps.
 
     Each substep of an iteration (evaluations and the adjoint) costs at least :data:`SECONDS_PER_SUBSTEP` plus
     ~4 n³ flops at :data:`FLOPS_PER_SECOND` (more than one core sustains) plus
@@ -101,7 +122,7 @@ def shooting_seconds(n: int, intervals: int, substeps: int, sensors: int = 1) ->
     refuses only what cannot finish in the time allowed.
     """
     per_substep = SECONDS_PER_SUBSTEP + 4.0 * float(n) ** 3 / FLOPS_PER_SECOND + SECONDS_PER_SENSOR_PAIR * sensors**2
-    return 10.0 * intervals * substeps * per_substep
+    return float(iterations) * intervals * substeps * per_substep
 
 
 class FieldKernel(StrictModel):
@@ -199,9 +220,10 @@ class ShootingOptions(StrictModel):
         None, ge=1, le=MAX_SUBSTEPS, description="RK4 steps per interval (default: h·λ ≤ 0.25)"
     )
     memory: int = Field(30, ge=2, le=500, description="L-BFGS history length")
-    homotopy: list[float] = Field([0.03, 0.1, 0.2, 0.4, 0.7, 1.0], min_length=1, description="coarse ε schedule")
+    homotopy: list[float] = Field([0.03, 0.1, 0.2, 0.4, 0.7, 1.0], min_length=1, max_length=1000,
+                                  description="coarse ε schedule")  # fmt: skip
     homotopy_tolerance: float = Field(1e-5, gt=0.0, lt=1.0, description="Ipopt tol of the coarse steps")
-    coarse_max_iterations: int = Field(300, ge=1, description="Ipopt iterations per coarse step")
+    coarse_max_iterations: int = Field(300, ge=1, le=1_000_000, description="Ipopt iterations per coarse step")
     full_sigma: bool | None = Field(None, description="write the full Σ(t) to solution.nc (default: n <= 25)")
     starts: int = Field(0, ge=0, le=100, description="random coarse ε = 1 starts beside the ε-homotopy; the lowest "
                         "coarse J starts the fine solve (docs/theory/field.md §3.4)")  # fmt: skip

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from ..core.config import ConfigError
+from .field import COARSE_H_LAMBDA
 from .problem import Problem
 from .shooting import FieldShooting
 from .solution import HomotopyStep, Solution, SolveStatus, StartKind
@@ -103,7 +104,7 @@ def solve_shooting(
     else:
         start = StartKind.COARSE.value
         t_coarse = time.perf_counter()
-        coarse = FieldShooting(problem, o.coarse_intervals, scaling="energy", max_h_lambda=2.0)
+        coarse = FieldShooting(problem, o.coarse_intervals, scaling="energy", max_h_lambda=COARSE_H_LAMBDA)
         wc = np.zeros(coarse.nw)
         for eps in o.homotopy:
             t0 = time.perf_counter()

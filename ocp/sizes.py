@@ -87,7 +87,14 @@ def indirect_estimate(problem: Problem) -> Estimate:
 
 def shooting_estimate(problem: Problem) -> Estimate:
     """Peak memory and least time of the reduced-space shooting method (:mod:`mobisense.ocp.field`)."""
-    from .field import shooting_memory_bytes, shooting_seconds, shooting_substeps
+    from .field import (
+        COARSE_H_LAMBDA,
+        START_ITERATIONS,
+        STEP_ITERATIONS,
+        shooting_memory_bytes,
+        shooting_seconds,
+        shooting_substeps,
+    )
 
     o, n = problem.solver.shooting, problem.n
     noise = [s.noise.parameters()[0] for s in problem.sensors]
@@ -98,11 +105,21 @@ def shooting_estimate(problem: Problem) -> Estimate:
     if m == 1:  # one substep per interval: K itself sets K·m
         hint = "use fewer intervals (solver.shooting.intervals, --intervals) or a coarser grid (process.field.grid)"
     else:
-        hint = ("use a coarser grid (process.field.grid), fewer sensors or a shorter horizon; memory grows with "
-                "(n² + N²) K·m, and K·m with the horizon times the field's fastest rate (docs/theory/field.md §3.3), "
-                "not with K")
+        hint = (
+            "use a coarser grid (process.field.grid), fewer sensors or a shorter horizon; memory grows with "
+            "(n² + N²) K·m, and K·m with the horizon times the field's fastest rate (docs/theory/field.md §3.3), "
+            "not with K"
+        )
     N = problem.N
-    return Estimate(what, shooting_memory_bytes(n, o.intervals, m, N), hint, shooting_seconds(n, o.intervals, m, N))
+    # the coarse phase first: each ε step of the schedule and each random start, on the coarse grid
+    m_coarse = shooting_substeps(problem.process.field, noise, problem.horizon.tf - problem.horizon.t0,
+                                 o.coarse_intervals, COARSE_H_LAMBDA)  # fmt: skip
+    coarse_iterations = STEP_ITERATIONS * len(o.homotopy) + START_ITERATIONS * o.starts
+    seconds = shooting_seconds(n, o.intervals, m, N) + shooting_seconds(n, o.coarse_intervals, m_coarse, N,
+                                                                         coarse_iterations)  # fmt: skip
+    if o.starts:
+        hint += "; fewer random starts (solver.shooting.starts)"
+    return Estimate(what, shooting_memory_bytes(n, o.intervals, m, N), hint, seconds)
 
 
 def problem_estimates(

@@ -251,8 +251,17 @@ def _sensors(count: int):
      ((5, 5), {}, _sensors(1000), ["--max-memory", "4G"], "the shooting NLP (n = 25 field states, N = 1000 "
                                                           "sensors, K = 100 intervals of m = 9 RK4 substeps) needs "
                                                           "about 21.3 GiB"),
-     ((3, 3), {}, _sensors(200), ["--max-time", "1s"], "would compute for at least")],
-    ids=["grid", "memory", "budget", "substeps", "sensors-memory", "sensors-time"],
+     ((3, 3), {}, _sensors(200), ["--max-time", "1s"], "would compute for at least"),
+     # the time estimate counted 10 fine iterations only: 100 random coarse starts (each ≥ 40 iterations measured)
+     # ran past a minute under --max-time 20s (red team); the coarse phase is now counted too
+     ((5, 5), {"starts": 100}, None, ["--max-time", "20s"], "would compute for at least"),
+     # 200 000 ε steps, or 1e18 Ipopt iterations per coarse step, reached the solver (exit 1, or a hang)
+     ((2, 2), {"homotopy": [float(x) for x in np.linspace(1e-3, 1.0, 2000)]}, None, [],
+      "solver.shooting.homotopy: expected at most 1000 items, not 2000"),
+     ((2, 2), {"coarse_max_iterations": 10**18}, None, [],
+      "solver.shooting.coarse_max_iterations: expected less than or equal to 1000000")],
+    ids=["grid", "memory", "budget", "substeps", "sensors-memory", "sensors-time", "starts-time", "schedule",
+         "coarse-iterations"],
 )  # fmt: skip
 def test_hostile_sizes_are_refused_before_allocation(tmp_path, capsys, grid, shooting, change, options, message):
     import tracemalloc
