@@ -32,7 +32,7 @@ import numpy as np
 from ..core.netcdf_writer import DatasetContent
 
 __all__ = ["TASK_DIM", "TASKS", "stack_tasks", "task_dataset", "shape_key", "is_stacked", "write_task_files",
-           "remove_unlisted"]
+           "remove_unlisted", "lost_solutions"]
 
 #: the folder of the task files inside a sweep folder
 TASKS = "tasks"
@@ -205,6 +205,38 @@ def remove_unlisted(folder: Path, rows: Iterable[dict[str, Any]]) -> None:
     for path in (Path(folder) / TASKS).glob("part-*.nc"):
         if _PART.match(path.name) and f"{TASKS}/{path.name}" not in listed:
             path.unlink(missing_ok=True)
+
+
+def lost_solutions(folder: Path, rows: Iterable[dict[str, Any]]) -> dict[str, str]:
+    """The finished rows whose solution is gone: task id -> why (its file missing, unreadable or without it).
+
+    A row's ``solution_file`` must be a regular file under ``tasks/`` (not a link) that HDF5 opens and whose
+    ``task`` coordinate holds the row's index; the files are opened once each, only the coordinate is read.
+    Rows without a ``solution_file`` (an error row, or a folder of an earlier version) are not checked.
+    """
+    import h5py
+
+    by_file: dict[str, list[dict[str, Any]]] = {}
+    for row in rows:
+        if row.get("solution_file"):
+            by_file.setdefault(str(row["solution_file"]), []).append(row)
+    lost: dict[str, str] = {}
+    for name, members in by_file.items():
+        path = Path(folder) / name
+        indices: set[int] = set()
+        if not _PART.match(path.name) or path.parent.name != TASKS or path.is_symlink() or not path.is_file():
+            why = f"{name} is missing"
+        else:
+            try:
+                with h5py.File(path, "r") as f:
+                    indices = {int(i) for i in np.asarray(f[TASK_DIM][()]).ravel()}
+                why = f"{name} does not hold it"
+            except Exception as exc:  # noqa: BLE001  (h5py raises many kinds for a damaged file)
+                why = f"{name} is unreadable ({type(exc).__name__})"
+        for row in members:
+            if int(row["index"]) not in indices:
+                lost[str(row["task"])] = why
+    return lost
 
 
 def _plain(value: Any) -> Any:

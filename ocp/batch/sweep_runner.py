@@ -7,6 +7,7 @@ number of tasks (before expanding them), the memory budget, every task's problem
 
 from __future__ import annotations
 
+import sys
 import time
 from contextlib import nullcontext
 from dataclasses import dataclass
@@ -15,7 +16,7 @@ from typing import Any
 
 from ...core.files import write_json
 from ...core.interrupts import deferred_interrupts
-from ..task_files import remove_unlisted, write_task_files
+from ..task_files import lost_solutions, remove_unlisted, write_task_files
 from .sweep import RESULT_COLUMNS, expand_sweep, load_sweep
 from .sweep_report import SweepProgress, sweep_summary
 
@@ -133,6 +134,12 @@ def run_sweep(
         store = ResultStore(out, {k: value_kind(v) for k, v in spec.vary.items()})
         previous = store.read() if resuming else {}
         rows = {t: r for t, r in previous.items() if r["status"] in DONE}
+        lost = lost_solutions(out, rows.values())
+        if lost:  # a part file deleted, truncated or replaced since: its tasks are solved again
+            first = next(iter(lost.values()))
+            print(f"mobisense: {len(lost)} finished task(s) of {out} lost their solutions ({first}): solving them "
+                  "again", file=sys.stderr)  # fmt: skip
+            rows = {t: r for t, r in rows.items() if t not in lost}
         todo = [t for t in tasks if t.task not in rows]
         batch = _Batch(store, out)
         progress = SweepProgress(len(tasks), len(tasks) - len(todo), quiet=quiet)

@@ -407,3 +407,36 @@ def test_a_sweep_reports_the_warnings_solve_would_print_for_each_task(tmp_path, 
         # the report's refined maximum against scipy's (integration tolerance 1e-11, Brent to 1e-10 in t)
         assert reported["max_violation"] == pytest.approx(-best.fun, rel=1e-6)
         assert reported["max_violation_time"] == pytest.approx(best.x, abs=1e-6)
+
+
+def test_a_resumed_sweep_solves_again_the_tasks_whose_solution_files_were_lost(tmp_path, capsys):
+    # a part file deleted, truncated or replaced by a link since the sweep ran: the resume reported every task
+    # done (exit 0, "resumed: 2") while results.parquet named files a replay could not read (red team)
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump(hussein2008(collocation={"intervals": 20})))
+    spec = {"base": "base.yaml", "mode": "grid", "vary": {"cost.alpha": [0.004, 0.008]}}
+    (tmp_path / "sweep.yaml").write_text(yaml.safe_dump(spec))
+    out = tmp_path / "out"
+    args = ["sweep", str(tmp_path / "sweep.yaml"), "--out", str(out), "--workers", "1", "--quiet", "--no-plot"]
+    assert cli.main(args) == 0
+    first = pd.read_parquet(out / "results.parquet").sort_values("index")
+    for damage in ("truncate", "link", "delete"):
+        part = out / first["solution_file"].iloc[0]
+        if damage == "truncate":
+            part.write_bytes(part.read_bytes()[:100])
+        elif damage == "link":
+            part.unlink()
+            part.symlink_to("/etc/hostname")
+        else:
+            part.unlink()
+        capsys.readouterr()
+        assert cli.main(args) == 0
+        err = capsys.readouterr().err
+        assert "2 finished task(s) of" in err and "lost their solutions" in err and "solving them again" in err
+        rows = pd.read_parquet(out / "results.parquet").sort_values("index")
+        assert json.loads((out / "summary.json").read_text())["counts"]["resumed"] == 0
+        for _, row in rows.iterrows():  # every row's solution readable again, and the same optimum
+            solution = Solution.load(out / row["solution_file"], task=int(row["index"]))
+            assert solution.cost == pytest.approx(first["cost"].iloc[int(row["index"])], rel=1e-9)
+        first = rows
+    capsys.readouterr()
+    assert cli.main(args) == 0 and "lost" not in capsys.readouterr().err  # nothing lost: nothing solved again
