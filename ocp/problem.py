@@ -315,7 +315,8 @@ class Problem(StrictModel):
 
         Memory and time are the commands' budget (``--max-memory``, ``--max-time``: :mod:`mobisense.ocp.sizes`);
         this bounds the number of steps, whatever the machine. The key named is the one that makes λ_max large:
-        the noise variance of the most informative sensor, or the field's time constant.
+        the noise variance of the most informative sensor, the kernel's variance σ² when it is the larger factor of
+        σ²/r, or the field's time constant.
         """
         o, spec, T = self.solver.shooting, self.process.field, self.horizon.tf - self.horizon.t0
         if o.substeps is not None or not all(s.noise.model == "constant" for s in self.sensors):
@@ -329,6 +330,8 @@ class Problem(StrictModel):
         noise_dominates = rate * rate - a * a > a * a  # λ_max² = a² + 2aΣσ²/r: the measurement term is the larger
         key, cause = (f"sensors[{i}].noise.variance_value", f"noise variance {noise[i]:g}") if noise_dominates else (
             "process.field.time_constant", f"time constant {spec.time_constant:g}")  # fmt: skip
+        if noise_dominates and spec.kernel.variance >= sum(1.0 / r for r in noise):  # σ²/r: σ² the larger factor
+            key, cause = "process.field.kernel.variance", f"kernel variance {spec.kernel.variance:g}"
         raise InvalidValue(key, f"the {cause} makes the field's fastest rate λ_max = {rate:.3g} per unit time; "
                            f"on intervals h = {T / o.intervals:.3g} the shooting method needs m = {m} RK4 substeps "
                            f"(h·λ_max ≤ 0.25), expected at most {MAX_SUBSTEPS} (more solver.shooting.intervals, "

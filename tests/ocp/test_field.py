@@ -226,6 +226,14 @@ def _noise(value: float):
     return apply
 
 
+def _kernel_variance(value: float):
+    def apply(data):
+        data["process"]["field"]["kernel"]["variance"] = value
+        return data
+
+    return apply
+
+
 def _sensors(count: int):
     def apply(data):
         data["sensors"] = [{**data["sensors"][0], "name": f"s{i}", "p0": [0.004 * i, 0.5]} for i in range(count)]
@@ -252,6 +260,8 @@ def _sensors(count: int):
                                                           "sensors, K = 100 intervals of m = 9 RK4 substeps) needs "
                                                           "about 21.3 GiB"),
      ((3, 3), {}, _sensors(200), ["--max-time", "1s"], "would compute for at least"),
+     # a kernel variance of 1e90 was blamed on the sensors' noise variance 0.1 (red team)
+     ((2, 2), {}, _kernel_variance(1e90), [], "process.field.kernel.variance: the kernel variance 1e+90 makes"),
      # the time estimate counted 10 fine iterations only: 100 random coarse starts (each ≥ 40 iterations measured)
      # ran past a minute under --max-time 20s (red team); the coarse phase is now counted too
      ((5, 5), {"starts": 100}, None, ["--max-time", "20s"], "would compute for at least"),
@@ -260,7 +270,8 @@ def _sensors(count: int):
       "solver.shooting.homotopy: expected at most 1000 items, not 2000"),
      ((2, 2), {"coarse_max_iterations": 10**18}, None, [],
       "solver.shooting.coarse_max_iterations: expected less than or equal to 1000000")],
-    ids=["grid", "memory", "budget", "substeps", "sensors-memory", "sensors-time", "starts-time", "schedule",
+    ids=["grid", "memory", "budget", "substeps", "sensors-memory", "sensors-time", "kernel-variance", "starts-time",
+         "schedule",
          "coarse-iterations"],
 )  # fmt: skip
 def test_hostile_sizes_are_refused_before_allocation(tmp_path, capsys, grid, shooting, change, options, message):
