@@ -140,7 +140,12 @@ def load_sweep(path: str | Path) -> tuple[SweepSpec, Problem]:
         raise ConfigError(f"{path}: base: {base_path} is a directory, expected the base problem file")
     if not base_path.exists():
         raise ConfigError(f"{path}: base: file not found: {base_path}")
-    return spec, load_problem(base_path)
+    if base_path.resolve() == Path(path).resolve():
+        raise ConfigError(f"{path}: base: expected the base problem file, got this sweep file itself")
+    try:
+        return spec, load_problem(base_path)
+    except ConfigError as err:  # the base's own error, under the key that named it (as a replan file's problem:)
+        raise ConfigError(f"{path}: base: {err}") from None
 
 
 def task_count(spec: SweepSpec, source: str = "<sweep>") -> int:

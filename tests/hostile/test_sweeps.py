@@ -12,6 +12,8 @@ import yaml
 from hostile.harness import GOOD, attack
 from hostile.inputs import small_problem
 
+from mobisense.core.errors import ConfigError
+
 pytestmark = pytest.mark.slow  # each case starts a Python process (~1 s); some solve for seconds
 
 
@@ -172,3 +174,16 @@ def test_any_yaml_value_can_be_varied(tmp_path):
     assert set(table["solver.collocation.scheme"]) == {"radau", "legendre"}
     assert {json.loads(v)["beta"] for v in table["sensors[0].noise"]} == {5.0, 2.0}  # mappings stored as JSON
     assert json.loads((out / "sweep.json").read_text())["tasks"] == 8
+
+
+def test_a_bad_base_problem_is_reported_under_the_sweep_files_base_key(tmp_path):
+    # the base's own error came without the sweep file or its key ("/dev/zero: larger than …"), and a sweep whose
+    # base is itself was told to "run it with 'mobisense sweep'", which the user had just done (red team)
+    from mobisense.ocp.batch.sweep import load_sweep
+
+    path = _write(tmp_path, {"cost.alpha": [0.1]}, base={**small_problem(), "horizon": {"t0": 0.0, "tf": -1.0}})
+    with pytest.raises(ConfigError, match=rf"^{path}: base: {tmp_path / 'base.yaml'}: horizon"):
+        load_sweep(path)
+    path.write_text(yaml.safe_dump({"base": "input.yaml", "mode": "grid", "vary": {"cost.alpha": [0.1]}}))
+    with pytest.raises(ConfigError, match=r"base: expected the base problem file, got this sweep file itself"):
+        load_sweep(path)
