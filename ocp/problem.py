@@ -262,10 +262,11 @@ class Problem(StrictModel):
         names = [s.name for s in self.sensors]
         if self.constraints is not None:
             if self.solver.method != "direct":
+                why = "the indirect method has no state-constrained arcs; remove constraints or use method 'direct'"
+                if self.solver.method == "shooting":
+                    why = "a field's shooting method keeps terminal states and |u| ≤ u_max only; remove constraints"
                 raise InvalidValue(
-                    "constraints",
-                    f"expected no path constraints with solver.method {self.solver.method!r}: the indirect "
-                    "method has no state-constrained arcs; remove constraints or use method 'direct'",
+                    "constraints", f"expected no path constraints with solver.method {self.solver.method!r}: {why}"
                 )
             if self.constraints.min_separation is not None and len(self.sensors) < 2:
                 raise InvalidValue("constraints.min_separation", "expected at least two sensors to keep apart, "

@@ -160,6 +160,9 @@ def test_schema_refuses_inconsistent_field_files():
     fixed["sensors"][0]["measures"] = [[1.0] + [0.0] * 8]
     with pytest.raises(ConfigError, match=r"sensors\[0\]\.measures: expected 'point' with method 'shooting'"):
         ms.Problem.from_dict(fixed)
+    zoned = {**field_problem(), "constraints": {"max_speed": 2.0}}  # was refused for "the indirect method's" reason
+    with pytest.raises(ConfigError, match=r"constraints: .* 'shooting': a field's shooting method keeps terminal"):
+        ms.Problem.from_dict(zoned)
 
 
 def test_terminal_position_and_control_bound_hold():
