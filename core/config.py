@@ -348,6 +348,8 @@ def _describe(error: dict[str, Any], model: type[BaseModel], suggestion_for: dic
             message = message[len(prefix) :]
     if message.startswith("Input should be "):
         message = "expected " + message[len("Input should be ") :]
+    if kind == "model_type":  # "a valid dictionary or instance of PathConstraints": the class is not the user's word
+        message = "expected a mapping of keys to values"
     got = error.get("input")
     if kind in ("too_long", "too_short"):  # "List should have at most 2 items after validation, not 3"
         bound = (error.get("ctx") or {}).get("max_length" if kind == "too_long" else "min_length")

@@ -122,6 +122,9 @@ BAD_INPUTS = [
         "unknown collocation scheme 'gauss'; expected one of 'legendre', 'radau'",
     ),
     ("solver.homotopy.step", _mutate(["solver", "homotopy", "step"], 2.0), "expected less than or equal to 1"),
+    # a section that is not a mapping was "a valid dictionary or instance of PathConstraints" (an internal class)
+    ("constraints", _mutate(["constraints"], [1, 2]), "expected a mapping of keys to values (got [1, 2], a list)"),
+    ("solver.homotopy", _mutate(["solver", "homotopy"], None), "expected a mapping of keys to values (got null)"),
 ]
 
 
