@@ -131,11 +131,18 @@ def _plan_replay(config: Any, source: Path) -> list[Estimate]:
     return parts + [Estimate(what, 8.0 * floats, hint, mc.runs * steps * n * 0.5e-6)]
 
 
+#: least time of one re-solve beyond its Ipopt iterations (s): the window's problem validated, the previous plan
+#: shifted onto its grid, Ipopt's fixed cost per call. The default problem's re-solves took 11–18 ms (median),
+#: which the non-zero term alone put at 0.4 ms: 40 000 re-solves passed --max-time 30s and ran 13 min (red team)
+SECONDS_PER_RESOLVE = 5e-3
+
+
 def _replan(config: Any, source: Path) -> list[Estimate]:
     """Flights (3 policies × runs × steps), the plans kept (runs × re-plans × samples) and the re-solves.
 
     One transcription per window length is held (up to one per re-plan); each warm re-solve takes ≥ 2
-    Ipopt iterations (3–5 measured) at the per-non-zero cost of :mod:`mobisense.ocp.sizes`.
+    Ipopt iterations (3–5 measured) at the per-non-zero cost of :mod:`mobisense.ocp.sizes`, plus
+    :data:`SECONDS_PER_RESOLVE` for posing the window (its problem, the shifted point, the Ipopt call).
     """
     from ..ocp.direct.nlp_size import transcription_size
     from ..ocp.model import Structure
@@ -154,7 +161,7 @@ def _replan(config: Any, source: Path) -> list[Estimate]:
     flights = Estimate(what, _COPIES * 8.0 * floats, hint, 3 * runs * steps * 30e-6)
     c = problem.solver.collocation
     size = transcription_size(Structure.of(problem), c.degree, c.intervals, c.scheme)
-    solve_seconds = 2 * (size.jacobian_nnz + size.hessian_nnz) * SECONDS_PER_NONZERO_ITERATION
+    solve_seconds = SECONDS_PER_RESOLVE + 2 * (size.jacobian_nnz + size.hessian_nnz) * SECONDS_PER_NONZERO_ITERATION
     held = direct_estimate(problem)
     solves = Estimate(f"{runs * replans:.3g} re-solves of {held.what}", min(replans, c.intervals) * held.bytes,
                       hint, held.seconds + runs * replans * solve_seconds)  # fmt: skip
