@@ -48,6 +48,12 @@ _TYPES = {
 _LATER = ("solution_file", "warning")
 
 
+def _shortened(text: str, limit: int = 100) -> str:
+    """``text`` on one line, cut at a word before ``limit`` characters with an ellipsis (not mid-sentence, unmarked)."""
+    text = " ".join(text.split())
+    return text if len(text) <= limit else text[: limit - 1].rsplit(" ", 1)[0] + " …"
+
+
 def _number(x: Any) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
@@ -129,7 +135,7 @@ class ResultStore:
                 raise
             except Exception as exc:  # noqa: BLE001  (pyarrow raises many kinds for a damaged file)
                 raise ConfigError(
-                    f"{fragment}: not a readable results fragment ({' '.join(str(exc).split())[:100]}); delete it "
+                    f"{fragment}: not a readable results fragment ({_shortened(str(exc))}); delete it "
                     "to re-run its tasks, or choose another --out"
                 ) from None
             for record in records:

@@ -440,3 +440,16 @@ def test_a_resumed_sweep_solves_again_the_tasks_whose_solution_files_were_lost(t
         first = rows
     capsys.readouterr()
     assert cli.main(args) == 0 and "lost" not in capsys.readouterr().err  # nothing lost: nothing solved again
+
+
+def test_a_damaged_results_fragment_is_named_with_its_reason_cut_at_a_word(tmp_path):
+    # pyarrow's reason was cut at 100 characters mid-sentence ("… Parquet magic bytes not)") (red team)
+    from mobisense.ocp.batch.results_store import ResultStore
+
+    store = ResultStore(tmp_path, {"cost.alpha": "float64"})
+    store.path.mkdir(parents=True)
+    (store.path / "part-000001.parquet").write_bytes(b"\0" * 4096)
+    with pytest.raises(ConfigError) as err:
+        store.read()
+    reason = str(err.value).split("not a readable results fragment (", 1)[1].split("); delete it", 1)[0]
+    assert len(reason) <= 100 and (reason.endswith(" …") or "magic bytes not found" in reason)
