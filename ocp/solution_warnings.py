@@ -120,8 +120,10 @@ def strategy_warning(solution: Any) -> str | None:
     why = (f"spent its budget of {strategy.get('homotopy_budget')} iterations (solver.homotopy.budget × the cold "
            "solve's; null lets it finish)" if run.get("status") == "budget spent" else
            f"ended with {run.get('status')}")  # fmt: skip
-    return (f"strategy homotopy: the continuation stopped at ε = {run.get('eps_reached'):g} when it {why}; "
-            f"the {strategy.get('kept')} solve's plan is kept")  # fmt: skip
+    reached = run.get("eps_reached") or 0.0  # the last ε solved: 0 is the coasting start, before any step
+    where = f"after solving ε = {reached:g}" if reached > 0 else "within its first ε step"
+    return (f"strategy homotopy: the continuation stopped {where} when it {why}; the {strategy.get('kept')} solve's "
+            "plan is kept")  # fmt: skip
 
 
 def init_warning(solution: Any) -> str | None:

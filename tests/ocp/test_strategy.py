@@ -170,7 +170,10 @@ def test_a_continuation_cut_by_its_budget_is_reported_when_homotopy_was_asked_fo
     cut = solved(1.5)
     assert cut.stats["strategy"]["kept"] == "cold"
     warning = cut.summary()["warning"]
-    assert warning.startswith("strategy homotopy: the continuation stopped at ε = ")
+    reached = next(s for s in cut.stats["strategy"]["starts"] if s["start"] == "homotopy")["eps_reached"]
+    # "stopped at ε = 0" read as a step at ε = 0 (red team): ε = 0 solved is the coasting start, no step yet
+    where = f"after solving ε = {reached:g}" if reached > 0 else "within its first ε step"
+    assert warning.startswith(f"strategy homotopy: the continuation stopped {where} when it spent its budget")
     assert "spent its budget of" in warning and "the cold solve's plan is kept" in warning
     free = solved(None)  # no budget: the continuation runs to ε = 1 and is kept, nothing to say
     assert free.stats["strategy"]["kept"] == "homotopy" and "warning" not in free.summary()
