@@ -32,35 +32,36 @@ def test_budget_refuses_with_what_and_how():
     assert 0 < default_memory_limit() <= os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2
 
 
-def test_transcription_size_matches_the_built_nlp():
+def _check_size_against_the_built_nlp(data: dict, intervals: int) -> None:
+    """Variables and constraints exact; CasADi's Jacobian and Hessian patterns at most the estimate, and within 1.5×."""
     from mobisense.ocp.direct.nlp_size import transcription_size
     from mobisense.ocp.direct.transcription import transcription_for
     from mobisense.ocp.model import Structure
     from mobisense.ocp.problem import Problem
 
-    data = hussein2008(collocation={"intervals": 5})
-    data["sensors"].append({**data["sensors"][0], "name": "s2", "p0": [-5.0, 3.0], "u_max": 2.0})
     problem = Problem.from_dict(data)
     tr = transcription_for(problem)
-    size = transcription_size(Structure.of(problem), 3, 5, "radau")
+    size = transcription_size(Structure.of(problem), 3, intervals, "radau")
     assert (size.variables, size.constraints) == (tr.nw, tr.ng)  # exact
     solver = tr._solver(False).function
     jacobian = solver.get_function("nlp_jac_g").sparsity_out(1).nnz()
     hessian = solver.get_function("nlp_hess_l").sparsity_out(0).nnz()
-    # structural upper estimates: CasADi's patterns are at most these, and not far below (measured +12 … +17 %
-    # for N = 1–3, Radau and Legendre)
     assert jacobian <= size.jacobian_nnz <= 1.5 * jacobian
     assert hessian <= size.hessian_nnz <= 1.5 * hessian
 
 
+def test_transcription_size_matches_the_built_nlp():
+    # structural upper estimates: CasADi's patterns are at most these, and not far below (measured +12 … +17 %
+    # for N = 1–3, Radau and Legendre)
+    data = hussein2008(collocation={"intervals": 5})
+    data["sensors"].append({**data["sensors"][0], "name": "s2", "p0": [-5.0, 3.0], "u_max": 2.0})
+    _check_size_against_the_built_nlp(data, 5)
+
+
 def test_transcription_size_counts_every_kind_of_path_constraint():
     # the path constraints were left out of the count: 50 sensors and 100 polygons of 64 vertices were taken for
-    # the unconstrained NLP's 3e6 non-zeros, and the build ran out of a 4 GB address space after 107 s (red team)
-    from mobisense.ocp.direct.nlp_size import transcription_size
-    from mobisense.ocp.direct.transcription import transcription_for
-    from mobisense.ocp.model import Structure
-    from mobisense.ocp.problem import Problem
-
+    # the unconstrained NLP's 3e6 non-zeros, and the build ran out of a 4 GB address space after 107 s (red team);
+    # the rows are exact, the non-zeros measured +3 % here
     data = hussein2008(collocation={"intervals": 4})
     s0 = data["sensors"][0]
     data["sensors"] = [{**s0, "name": f"s{i}", "p0": [20.0 + 3 * i, 20.0], "v0": [0.0, 0.0]} for i in range(3)]
@@ -68,15 +69,7 @@ def test_transcription_size_counts_every_kind_of_path_constraint():
                                         {"polygon": [[-20, -40], [-15, -40], [-15, -35], [-17, -33], [-20, -35]]}],
                            "min_separation": 0.5, "max_speed": 50.0,
                            "workspace": {"x": [-100, 100], "y": [-100, 100]}}  # fmt: skip
-    problem = Problem.from_dict(data)
-    tr = transcription_for(problem)
-    size = transcription_size(Structure.of(problem), 3, 4, "radau")
-    assert (size.variables, size.constraints) == (tr.nw, tr.ng)  # exact
-    solver = tr._solver(False).function
-    jacobian = solver.get_function("nlp_jac_g").sparsity_out(1).nnz()
-    hessian = solver.get_function("nlp_hess_l").sparsity_out(0).nnz()
-    assert jacobian <= size.jacobian_nnz <= 1.5 * jacobian  # measured +3 %
-    assert hessian <= size.hessian_nnz <= 1.5 * hessian
+    _check_size_against_the_built_nlp(data, 4)
 
 
 def test_a_constrained_problem_too_large_to_build_is_refused_before_anything_is_allocated(tmp_path, capsys):
