@@ -187,3 +187,29 @@ def test_a_bad_base_problem_is_reported_under_the_sweep_files_base_key(tmp_path)
     path.write_text(yaml.safe_dump({"base": "input.yaml", "mode": "grid", "vary": {"cost.alpha": [0.1]}}))
     with pytest.raises(ConfigError, match=r"base: expected the base problem file, got this sweep file itself"):
         load_sweep(path)
+
+
+def test_a_sweep_over_large_field_grids_is_budgeted_without_building_the_fields(tmp_path):
+    # each task's structure built its field's kernel matrix and factorised it (O(n³): 3 s and 50 MB a 50 × 50
+    # grid); 30 grids took 35 s and 1.4 GB before the budget refused the sweep (red team). A point sensor's one
+    # row is counted without the field now.
+    import time
+    import tracemalloc
+
+    from short_runs import field_problem
+
+    from mobisense.ocp.batch.sweep import expand_sweep, load_sweep, sweep_estimates
+
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump(field_problem()))
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump({"base": "base.yaml", "mode": "grid",
+                                    "vary": {"process.field.grid": [[50, 50 - k] for k in range(4)]}}))  # fmt: skip
+    spec, base = load_sweep(path)
+    tracemalloc.start()
+    start = time.perf_counter()
+    tasks = expand_sweep(spec, base, str(path))
+    estimates = sweep_estimates(spec, base, 1, str(path), tasks)
+    seconds, peak = time.perf_counter() - start, tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert len(tasks) == 4 and max(e.bytes for e in estimates) > 100 * 2**30  # refused by any machine's budget
+    assert seconds < 2.0 and peak < 20e6  # one 2500 × 2500 kernel matrix alone is 50 MB
