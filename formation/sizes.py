@@ -85,13 +85,14 @@ def _reference_problem(
     from ..ocp.problem import load_problem
     from ..ocp.sizes import problem_estimates
     from ..ocp.solution import Solution
+    from .replay.reference import replay_method
 
     try:
         if solution is not None and solution.exists():
             return Solution.read_problem(solution, task), []
         if problem is not None and problem.exists():
-            p = load_problem(problem)  # solved as the replay will: a field by shooting, anything else directly
-            return p, problem_estimates(p, method="shooting" if p.solver.method == "shooting" else "direct")
+            p = load_problem(problem)
+            return p, problem_estimates(p, method=replay_method(p))  # solved as the replay will solve it
     except ConfigError as err:
         which = key if solution is not None and solution.exists() else key.replace("solution", "problem")
         raise ConfigError(f"{source}: {which}: {err}") from None

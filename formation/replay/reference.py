@@ -26,7 +26,8 @@ if TYPE_CHECKING:
     from ...ocp.problem import Problem
     from ...ocp.solution import Solution
 
-__all__ = ["load_checked", "load_or_solve", "reference_status", "ReferenceTrajectory", "TrackingController"]
+__all__ = ["load_checked", "load_or_solve", "reference_status", "replay_method", "ReferenceTrajectory",
+           "TrackingController"]  # fmt: skip
 
 
 def _read_solution(path: Path, task: int | None = None) -> tuple[Solution | None, str]:
@@ -83,12 +84,10 @@ def _check(
             raise ConfigError(f"{solution_path}: file not found (give 'problem:' to solve it first)")
         return None, problem, f"{solution_path} not found"
     solution, why = _read_solution(solution_path, task)
-    if solution is not None and problem is not None and solution.problem.digest() != problem.digest():
-        stored, current = solution.problem.digest(), problem.digest()
-        solution, why = (
-            None,
-            f"{solution_path} is stale: it solves problem hash {stored}, {problem_path} has hash {current}",
-        )
+    current = None if problem is None else problem.digest()
+    if solution is not None and current is not None and (stored := solution.problem.digest()) != current:
+        why = f"{solution_path} is stale: it solves problem hash {stored}, {problem_path} has hash {current}"
+        solution = None
     rebuilt = ""
     if solution is not None and solution.stats.get("sigma_reintegrated"):
         rebuilt = (
@@ -102,11 +101,7 @@ def _check(
         return None, problem, why
     if problem is None:
         return solution, None, f"loaded {solution_path} (not checked against a problem file: give 'problem:'){rebuilt}"
-    return (
-        solution,
-        problem,
-        f"loaded {solution_path} (problem hash {problem.digest()} matches {problem_path}){rebuilt}",
-    )
+    return solution, problem, f"loaded {solution_path} (problem hash {current} matches {problem_path}){rebuilt}"
 
 
 def reference_status(
@@ -122,6 +117,15 @@ def reference_status(
     if tracking is not None and planned is not None:
         tracking.check_horizon(planned.horizon.tf - planned.horizon.t0, source)
     return note if solution is not None else f"{note}: the replay solves {problem_path} first"
+
+
+def replay_method(problem: Problem) -> str:
+    """The method a replay solves ``problem`` by when no usable solution is given.
+
+    ``"shooting"`` for a field problem (direct collocation cannot hold its states), else ``"direct"``; the replay's
+    budget (:mod:`mobisense.formation.sizes`) estimates the same solve.
+    """
+    return "shooting" if problem.solver.method == "shooting" else "direct"
 
 
 def load_checked(solution_path: Path, problem_path: Path | None, task: int | None = None) -> tuple[Solution, str, bool]:
@@ -153,7 +157,7 @@ def load_checked(solution_path: Path, problem_path: Path | None, task: int | Non
     if solution is not None:
         return solution, note, False
     assert problem is not None  # _check raises when there is neither
-    if problem.solver.method == "shooting":  # a field problem: its own method (direct cannot hold it)
+    if replay_method(problem) == "shooting":
         from ...ocp.field_solve import solve_shooting
 
         solution, how = solve_shooting(problem), "by shooting"
