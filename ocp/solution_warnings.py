@@ -23,10 +23,14 @@ PLAN_TOLERANCE = 1e-5
 PATH_TOLERANCE = 1e-2
 
 
-def solution_warnings(solution: Any, smallest: float) -> list[str]:
-    """Every warning that applies to ``solution``, whose Σ(t) has smallest eigenvalue ``smallest``."""
+def solution_warnings(solution: Any, smallest: float, init: bool = True) -> list[str]:
+    """Every warning that applies to ``solution``, whose Σ(t) has smallest eigenvalue ``smallest``.
+
+    ``init=False`` leaves out :func:`init_warning` (a sweep warm-starts its tasks from neighbours itself: no ``init``
+    the user gave went unused).
+    """
     candidates = (plan_warning(solution), constraint_warning(solution), strategy_warning(solution),
-                  init_warning(solution))  # fmt: skip
+                  init_warning(solution) if init else None)  # fmt: skip
     warnings = [w for w in candidates if w]
     if smallest <= 0:  # a covariance that is not one: the grid or the solve did not follow the Riccati flow
         warnings.append(f"Σ(t) is not positive definite (smallest eigenvalue {smallest:.3g}): not a Kalman "

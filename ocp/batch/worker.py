@@ -78,10 +78,9 @@ def task_warnings(solution: Any) -> str:
     """
     if not solution.success:
         return ""
-    from ..solution_warnings import init_warning, solution_warnings
+    from ..solution_warnings import solution_warnings
 
-    internal = init_warning(solution)  # the sweep's own warm start from a neighbour, not an init the user gave
-    return " | ".join(w for w in solution_warnings(solution, solution.min_sigma_eigenvalue) if w != internal)
+    return " | ".join(solution_warnings(solution, solution.min_sigma_eigenvalue, init=False))
 
 
 def solve_start_share(payload: dict[str, Any], share: int, shares: int) -> list[dict[str, Any]]:
