@@ -116,18 +116,18 @@ def _solve(args: argparse.Namespace, figures: Any) -> int:
     data = read_yaml(args.problem)
     check_command_kind(data, source, ("problem",))  # a formation, sweep, … file: the command that runs it
     data = apply_overrides(data, args)
-    problem = Problem.from_dict(data, source=source)  # ConfigError -> exit 2, nothing written
-    if problem.solver.method == "shooting" and (args.degree is not None or args.scheme is not None):
-        raise ConfigError(f"{source}: --degree/--scheme: the shooting method has no collocation polynomials (its grid "
-                          "is solver.shooting: --intervals sets K)")  # fmt: skip
-    if problem.solver.method == "shooting":  # accepted and silently without effect before (field audit)
+    if _given_method(data) == "shooting":  # the flags first: the file's model would name their keys instead
+        if args.degree is not None or args.scheme is not None:
+            raise ConfigError(f"{source}: --degree/--scheme: the shooting method has no collocation polynomials (its "
+                              "grid is solver.shooting: --intervals sets K)")  # fmt: skip
         given = [flag for flag, value in (("--strategy", args.strategy), ("--homotopy", args.homotopy),
                                           ("--step", args.step), ("--homotopy-budget", args.homotopy_budget))
                  if value is not None]  # fmt: skip
-        if given:
+        if given:  # accepted and silently without effect before (field audit)
             raise ConfigError(f"{source}: {'/'.join(given)}: the shooting method runs its own ε schedule (0.03 … 1 on "
                               "a coarse grid, then ε = 1 on the fine one: docs/theory/field.md §3.4); leave "
                               f"{'them' if len(given) > 1 else 'it'} out")  # fmt: skip
+    problem = Problem.from_dict(data, source=source)  # ConfigError -> exit 2, nothing written
     cluster = Cluster.from_args(args)
     if args.multistart is None and (cluster.scheduler or cluster.workers):
         raise ConfigError(f"{source}: --workers/--scheduler: only used with --multistart")
@@ -233,6 +233,15 @@ def _local_workers(requested: int | None) -> int:
     return requested or os.cpu_count() or 1
 
 
+def _given_method(data: Any) -> str | None:
+    """``solver.method`` of a raw problem dict as its model will decide it (None for a malformed file)."""
+    if not isinstance(data, dict) or not isinstance(data.get("solver", {}), dict):
+        return None
+    process = data.get("process")
+    field = isinstance(process, dict) and process.get("field") is not None
+    return data.get("solver", {}).get("method", "shooting" if field else "direct")
+
+
 def apply_overrides(data: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
     """Apply command-line overrides to the raw problem dict (validated afterwards like the file)."""
     if not isinstance(data, dict):  # the model says what a file of another shape lacks
@@ -249,9 +258,7 @@ def apply_overrides(data: dict[str, Any], args: argparse.Namespace) -> dict[str,
         for k, v in (("intervals", args.intervals), ("degree", args.degree), ("scheme", args.scheme))
         if v is not None
     }
-    process = data.get("process")
-    field = isinstance(process, dict) and process.get("field") is not None
-    if "intervals" in collocation and solver.get("method", "shooting" if field else "direct") == "shooting":
+    if "intervals" in collocation and _given_method(data) == "shooting":
         shooting = solver.setdefault("shooting", {})  # the grid this method solves on (no collocation)
         if isinstance(shooting, dict):
             from .field import ShootingOptions

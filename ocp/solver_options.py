@@ -113,3 +113,32 @@ class SolverOptions(StrictModel):
     tolerance: float = Field(1e-9, gt=0.0, lt=1e-2, description="Ipopt tol (scaled NLP error)")
     max_iterations: int = Field(500, ge=1, le=1_000_000)
     time_limit: float | None = Field(None, gt=0.0, le=1e9, description="wall-clock limit of each Ipopt solve (s)")
+
+    @model_validator(mode="after")
+    def _shooting_ignores_nothing(self) -> SolverOptions:
+        """Refuse a collocation or strategy setting the shooting method would silently not use.
+
+        Compared with the defaults rather than with the keys given, so that a normalised problem (every default
+        written out, as stored in solution files) reads back.
+        """
+        if self.method != "shooting":
+            return self
+        for key, why in SHOOTING_IGNORES.items():
+            value, default = getattr(self, key), type(self).model_fields[key].default
+            if value != default:
+                if isinstance(value, StrictModel):  # name the sub-key that differs
+                    key += "." + next(k for k in type(value).model_fields if getattr(value, k) != getattr(default, k))
+                raise InvalidValue(f"solver.{key}", f"not used by solver.method 'shooting' ({why}); leave it out "
+                                   "or use method 'direct'")  # fmt: skip
+        return self
+
+
+SHOOTING_IGNORES = {
+    "strategy": "it runs its own ε schedule, docs/theory/field.md §3.4",
+    "starts": "its random starts are solver.shooting.starts",
+    "consensus": "its random starts are solver.shooting.starts",
+    "homotopy": "its ε schedule is solver.shooting.homotopy",
+    "collocation": "it has no collocation polynomials; its grid is solver.shooting.intervals",
+    "codegen": "it compiles no collocation kernels",
+}
+"""The ``solver`` keys of the direct method that a field's shooting solve does not use, and why."""

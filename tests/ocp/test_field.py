@@ -6,6 +6,8 @@ DOP853 on the full Riccati equation, central finite differences, and the direct 
 
 from __future__ import annotations
 
+import re
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -349,6 +351,31 @@ def test_options_of_the_direct_methods_homotopy_are_refused_for_a_field(tmp_path
         err = capsys.readouterr().err
         assert f"{path}: {named}: the shooting method runs its own ε schedule" in err and err.count("\n") == 1
         assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("solver, named, why", [
+    ({"strategy": "thorough"}, "solver.strategy", "its own ε schedule"),
+    ({"starts": 3}, "solver.starts", "solver.shooting.starts"),
+    ({"homotopy": {"step": 0.1}}, "solver.homotopy.step", "solver.shooting.homotopy"),
+    ({"collocation": {"intervals": 40}}, "solver.collocation.intervals", "solver.shooting.intervals"),
+    ({"method": "shooting", "codegen": "off"}, "solver.codegen", "no collocation kernels"),
+])  # fmt: skip
+def test_the_direct_methods_settings_in_a_field_file_are_refused_not_ignored(solver, named, why):
+    # solver.strategy: thorough in a field file ran the same shooting solve as without it (stop-33 left item)
+    data = field_problem()
+    data["solver"] = {**data.get("solver", {}), **solver}
+    with pytest.raises(ConfigError, match=rf"{re.escape(named)}: not used by solver.method 'shooting' \(.*"
+                                          rf"{re.escape(why)}"):  # fmt: skip
+        ms.Problem.from_dict(data)
+    problem = ms.Problem.from_dict({**data, "solver": {**data["solver"], "method": "direct"}})
+    assert problem.solver.method == "direct"  # the same settings with the method that uses them
+
+
+def test_a_normalised_field_problem_with_every_default_written_out_reads_back():
+    # the refusal compares with the defaults: a solution file's problem (every key written) must still load
+    problem = ms.Problem.from_dict(field_problem())
+    again = ms.Problem.from_dict(problem.normalised())
+    assert again.digest() == problem.digest() and again.solver.method == "shooting"
 
 
 def test_an_infeasible_field_solve_reports_what_was_solved_and_its_worst_constraint_in_physical_units():
