@@ -146,6 +146,7 @@ def _replan(config: Any, source: Path) -> list[Estimate]:
     :data:`SECONDS_PER_RESOLVE` for posing the window (its problem, the shifted point, the Ipopt call).
     """
     from ..ocp.direct.nlp_size import transcription_size
+    from ..ocp.field import FLOPS_PER_SECOND
     from ..ocp.model import Structure
     from ..ocp.replan import PLAN_SAMPLES
     from ..ocp.sizes import SECONDS_PER_NONZERO_ITERATION, direct_estimate
@@ -159,7 +160,9 @@ def _replan(config: Any, source: Path) -> list[Estimate]:
     floats = runs * (steps * (2 * N + n * n) + (replans + 1) * PLAN_SAMPLES * (2 * N + 1))
     hint = "use fewer monte_carlo.runs, a larger monte_carlo.time_step or a larger replan.every"
     what = f"{runs} runs × {steps:.3g} steps × {replans} re-plans (horizon / time_step, horizon / every)"
-    flights = Estimate(what, _COPIES * 8.0 * floats, hint, 3 * runs * steps * 30e-6)
+    flights = Estimate(what, _COPIES * 8.0 * floats, hint, 3 * runs * steps * (30e-6 + 4.0 * n**3 / FLOPS_PER_SECOND))
+    if problem.solver.method == "shooting":
+        return [flights, _field_resolves(problem, runs * replans, hint)]
     c = problem.solver.collocation
     size = transcription_size(Structure.of(problem), c.degree, c.intervals, c.scheme)
     solve_seconds = SECONDS_PER_RESOLVE + 2 * (size.jacobian_nnz + size.hessian_nnz) * SECONDS_PER_NONZERO_ITERATION
@@ -167,6 +170,23 @@ def _replan(config: Any, source: Path) -> list[Estimate]:
     solves = Estimate(f"{runs * replans:.3g} re-solves of {held.what}", min(replans, c.intervals) * held.bytes,
                       hint, held.seconds + runs * replans * solve_seconds)  # fmt: skip
     return [flights, solves]
+
+
+def _field_resolves(problem: Any, resolves: int, hint: str) -> Estimate:
+    """A field's re-solves by shooting, one solve's memory at a time.
+
+    The full-horizon solve, then each window's fine ε = 1 solve: at least
+    :data:`~mobisense.ocp.field.FINE_ITERATIONS` iterations on the whole grid at one substep (a low bound:
+    windows shrink) plus :data:`SECONDS_PER_RESOLVE`.
+    """
+    from ..ocp.field import shooting_seconds
+    from ..ocp.sizes import shooting_estimate
+
+    whole = shooting_estimate(problem)
+    o = problem.solver.shooting
+    fine = shooting_seconds(problem.n, o.intervals, 1, problem.N)  # one substep per interval: windows' m may be less
+    return Estimate(f"{resolves:.3g} re-solves of {whole.what}", whole.bytes, hint + whole.hint.join(("; or ", "")),
+                    whole.seconds + resolves * (SECONDS_PER_RESOLVE + fine))  # fmt: skip
 
 
 def scenario_estimates(kind: str, config: Any, source: Path) -> list[Estimate]:

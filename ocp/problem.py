@@ -121,22 +121,27 @@ class Process(StrictModel):
     """The process ``x' = A x + B w``, ``E[w w'] = Q``, its initial error covariance and locations.
 
     Either the explicit matrices or ``field`` (a gridded random field, :class:`~mobisense.ocp.field.FieldSpec`,
-    from which A, B, Q, Σ0 and the locations are derived: docs/theory/field.md §1).
+    from which A, B, Q, Σ0 and the locations are derived: docs/theory/field.md §1; ``Sigma0`` may replace the
+    derived Σ0 = Kₛ, e.g. with the filter's Σ at a re-plan instant).
     """
 
     A: Matrix | None = Field(None, description="n×n state matrix of x' = A x + B w (1/T)")
     B: Matrix | None = Field(None, description="n×m noise input matrix")
     Q: Matrix | None = Field(None, description="m×m intensity of the white process noise w (symmetric, PSD)")
-    Sigma0: Matrix | None = Field(None, description="n×n initial error covariance (symmetric positive definite)")
+    Sigma0: Matrix | None = Field(None, description="n×n initial error covariance (symmetric positive definite); "
+                                  "with field: optional, default the field's stationary covariance Kₛ")
     locations: list[Vector2] | None = Field(None, description="one planar location per state (L)")
     field: FieldSpec | None = Field(None, description="a gridded random field instead of the matrices")
 
     @model_validator(mode="after")
     def _shapes(self) -> Process:
-        explicit = [k for k in ("A", "B", "Q", "Sigma0", "locations") if getattr(self, k) is not None]
+        explicit = [k for k in ("A", "B", "Q", "locations") if getattr(self, k) is not None]
         if self.field is not None:
             if explicit:
-                raise InvalidValue(explicit[0], "expected no explicit matrices with process.field (they are derived)")
+                raise InvalidValue(explicit[0], "expected no explicit matrices with process.field (they are derived; "
+                                   "only Sigma0 may replace Kₛ as the initial covariance)")  # fmt: skip
+            if self.Sigma0 is not None:  # a prior map's covariance, or the filter's Σ at a re-plan instant
+                check_spd("Sigma0", check_shape("Sigma0", self.Sigma0, (self.field.n, self.field.n)))
             return self
         for key in ("A", "B", "Q", "Sigma0", "locations"):
             if getattr(self, key) is None:
@@ -159,7 +164,10 @@ class Process(StrictModel):
     def arrays(self) -> dict[str, np.ndarray]:
         """A (n,n), B (n,m), Q (m,m), Sigma0 (n,n), locations (n,2) as float arrays (derived for a field)."""
         if self.field is not None:
-            return self.field.process().matrices()
+            arrays = self.field.process().matrices()
+            if self.Sigma0 is not None:
+                arrays["Sigma0"] = np.asarray(self.Sigma0, float)
+            return arrays
         return {k: np.asarray(getattr(self, k), float) for k in ("A", "B", "Q", "Sigma0", "locations")}
 
 

@@ -22,7 +22,7 @@ from .path_constraints import margins
 from .problem import Problem
 from .replan_window import Replanner, ReplanRecord
 
-__all__ = ["Disturbance", "FlightResult", "fly", "replan_monte_carlo"]
+__all__ = ["Disturbance", "FlightResult", "riccati_step", "fly", "replan_monte_carlo"]
 
 
 @dataclass(frozen=True)
@@ -63,6 +63,55 @@ def _plan_record(t: float, plan: Any) -> tuple[float, np.ndarray, np.ndarray]:
     return t, times, plan.sample(times).p
 
 
+def riccati_step(A: np.ndarray, W: np.ndarray, Sigma: np.ndarray, infos: list[np.ndarray], dt: float) -> np.ndarray:
+    """Σ(t + dt) of Σ' = AΣ + ΣA' + W − Σ S(t) Σ by RK4 on its linear (Möbius) form.
+
+    With Σ = X Y⁻¹: X' = AX + WY, Y' = S X − A'Y, X(0) = Σ, Y(0) = I (exact for the Riccati flow). The linear
+    system's rates are bounded by ρ = ‖A‖ + sqrt(‖W‖ ‖S‖) (the Hamiltonian scaled by diag(αI, I)), about the
+    square root of the Riccati equation's stiffness 2‖ΣS‖, and the step is cut into ⌈ρ dt⌉ RK4 substeps
+    (one when ρ dt ≤ 1, as on the shipped problems). Explicit Runge–Kutta on Σ itself overflowed to NaN within a
+    few steps when precise sensors met a large Σ; this stays positive definite. One substep is O(dt⁴) accurate
+    with the three given S; several interpolate S linearly between them (O(dt²) in S's change, stable).
+
+    Parameters
+    ----------
+    A, W : ndarray, shape (n, n)
+        Process matrix (1/T) and noise intensity BQB' (state²/T).
+    Sigma : ndarray, shape (n, n)
+        Σ(t) (state²).
+    infos : list of three ndarray, shape (n, n)
+        The measurements' information C'R⁻¹C at t, t + dt/2, t + dt (1/(state² T)).
+    dt : float
+        Step (T).
+    """
+    norm_S = max(float(np.linalg.norm(S)) for S in infos)
+    rate = float(np.linalg.norm(A)) + float(np.sqrt(np.linalg.norm(W) * norm_S))
+    substeps = max(1, int(np.ceil(rate * dt)))
+    h = dt / substeps
+
+    def info(tau: float) -> np.ndarray:  # S at fraction tau of the step
+        if substeps == 1:
+            return infos[round(2 * tau)]
+        k, frac = (0, 2 * tau) if tau <= 0.5 else (1, 2 * tau - 1)
+        return (1 - frac) * infos[k] + frac * infos[k + 1]
+
+    def rates(X: np.ndarray, Y: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return A @ X + W @ Y, S @ X - A.T @ Y
+
+    X, Y = Sigma, np.eye(len(Sigma))
+    for j in range(substeps):
+        S0, S1, S2 = (info((j + c) / substeps) for c in (0.0, 0.5, 1.0))
+        kx1, ky1 = rates(X, Y, S0)
+        kx2, ky2 = rates(X + 0.5 * h * kx1, Y + 0.5 * h * ky1, S1)
+        kx3, ky3 = rates(X + 0.5 * h * kx2, Y + 0.5 * h * ky2, S1)
+        kx4, ky4 = rates(X + h * kx3, Y + h * ky3, S2)
+        X = X + h / 6 * (kx1 + 2 * kx2 + 2 * kx3 + kx4)
+        Y = Y + h / 6 * (ky1 + 2 * ky2 + 2 * ky3 + ky4)
+        X = np.linalg.solve(Y.T, X.T).T  # back to Σ = X Y⁻¹ (Y = I) after each substep: no growth carried
+        Y = np.eye(len(Sigma))
+    return 0.5 * (X + X.T)
+
+
 def fly(
     problem: Problem,
     plan: Any,
@@ -73,7 +122,7 @@ def fly(
     control: bool = True,
     replanner: Replanner | None = None,
 ) -> FlightResult:
-    """Fly ``plan`` (a direct :class:`~mobisense.ocp.solution.Solution`) under ``disturbance``.
+    """Fly ``plan`` (a direct or field-shooting :class:`~mobisense.ocp.solution.Solution`) under ``disturbance``.
 
     ``every``: re-plan period (None: open loop) with ``replanner`` (default: shrinking horizon, shifted warm
     starts); ``control=False`` flies u = 0.
@@ -111,9 +160,8 @@ def fly(
 
     u_plan, j_plan = controls(plan, 0), 0
 
-    def sigma_dot(S: np.ndarray, pos: np.ndarray) -> np.ndarray:
-        info = np.asarray(model.information(pos.ravel(), P)).reshape(n, n)
-        return A @ S + S @ A.T + BQB - S @ info @ S
+    def information(pos: np.ndarray) -> np.ndarray:
+        return np.asarray(model.information(pos.ravel(), P)).reshape(n, n)
 
     for j in range(steps + 1):
         t = t0 + j * dt
@@ -129,14 +177,13 @@ def fly(
                 u_plan, j_plan = controls(plan, j), j
             next_replan += every  # type: ignore[operator]
         u = u_plan[j - j_plan]
-        # RK2 (Heun) for Σ along the straight step of the positions; Euler–Maruyama for the platforms
+        # Σ by the Möbius-RK4 step along the straight step of the positions; Euler–Maruyama for the platforms
         w = disturbance.force_noise_std * np.sqrt(dt) * rng.standard_normal((N, 2))
         p_next = p + dt * (v + drift)
-        k1 = sigma_dot(Sigma, p)
-        k2 = sigma_dot(Sigma + dt * k1, p_next)
-        trace_K = 0.5 * (np.trace(Kc @ Sigma) + np.trace(Kc @ (Sigma + dt * k1)))
+        Sigma_next = riccati_step(A, BQB, Sigma, [information(q) for q in (p, 0.5 * (p + p_next), p_next)], dt)
+        trace_K = 0.5 * (np.trace(Kc @ Sigma) + np.trace(Kc @ Sigma_next))
         running += dt * (0.5 * alpha * float(np.sum(u**2)) + trace_K)
-        Sigma = Sigma + 0.5 * dt * (k1 + k2)
+        Sigma = Sigma_next
         v = v + dt * u + w
         p = p_next
     result.cost = float(np.trace(M @ Sigma)) + running
@@ -179,12 +226,17 @@ def replan_monte_carlo(
     The open loop flies the full-horizon plan whatever the horizon of the closed loop: it is what would be
     flown without re-planning, and for a receding horizon the benchmark the windows are measured against.
     """
-    from .direct.solver import solve_direct
-
     replanner = Replanner(problem, length, warm_start)  # type: ignore[arg-type]
     h = problem.horizon
     build_time = replanner.prepare(np.arange(h.t0 + every, h.tf - 2 * time_step, every))
-    full = solve_direct(problem)
+    if replanner.shooting:
+        from .field_solve import solve_shooting
+
+        full = solve_shooting(problem)
+    else:
+        from .direct.solver import solve_direct
+
+        full = solve_direct(problem)
     plan = full if replanner.window(h.t0)[0] >= h.tf else replanner.first_plan()
     for what, solution in (("the full-horizon plan", full), ("the first window's plan", plan)):
         if not solution.success:

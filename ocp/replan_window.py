@@ -140,6 +140,12 @@ def window_problem(
     if t_end < tf:
         m = problem.matrices()
         data["cost"]["M"] = cost_to_go_weight(m["A"], m["M"], m["K"], tf - t_end).tolist()
+    if problem.solver.method == "shooting":  # a field: its own grid, the coarse one scaled alike (≥ 2 intervals)
+        shooting = data["solver"]["shooting"]
+        scale = intervals / shooting["intervals"]
+        shooting["intervals"] = int(intervals)
+        shooting["coarse_intervals"] = max(2, int(round(shooting["coarse_intervals"] * scale)))
+        return Problem.from_dict(data, source="<re-plan>")
     if strategy is not None:
         data["solver"]["strategy"] = strategy
     data["solver"]["collocation"]["intervals"] = int(intervals)
@@ -184,14 +190,20 @@ class Replanner:
         if self.warm_start not in WARM_STARTS:
             raise ValueError(f"warm_start: expected one of {WARM_STARTS}, got {self.warm_start!r}")
 
+    @property
+    def shooting(self) -> bool:
+        """Whether the windows are solved by a field's shooting method (else by direct collocation)."""
+        return self.problem.solver.method == "shooting"
+
     def window(self, t: float) -> tuple[float, int]:
         """Window end t_e (T) and interval count at re-plan instant ``t``."""
-        h = self.problem.horizon
+        h, solver = self.problem.horizon, self.problem.solver
         t_end = h.tf if self.length is None else min(t + self.length, h.tf)
-        K = self.problem.solver.collocation.intervals
+        K = solver.shooting.intervals if self.shooting else solver.collocation.intervals
         if self.warm_start == "reused":
             return t_end, K
-        return t_end, max(1, int(round(K * (t_end - t) / (h.tf - h.t0))))
+        fewest = 2 if self.shooting else 1
+        return t_end, max(fewest, int(round(K * (t_end - t) / (h.tf - h.t0))))
 
     def transcription(self, sub: Problem) -> Any:
         """The (kept) transcription of a window problem."""
@@ -206,6 +218,8 @@ class Replanner:
     def prepare(self, instants: np.ndarray) -> float:
         """Build the transcriptions of the windows at re-plan ``instants`` (T) before flying; wall time (s)."""
         start = time.perf_counter()
+        if self.shooting:  # a shooting graph holds its window's Σ0: each re-solve builds its own (timed with it)
+            return 0.0
         p, v, Sigma0 = self._initial_state()
         for t in instants:
             t_end, K = self.window(float(t))
@@ -225,6 +239,10 @@ class Replanner:
         t0 = self.problem.horizon.t0
         t_end, K = self.window(t0)
         sub = window_problem(self.problem, t0, t_end, *self._initial_state(), K, strategy=None)
+        if self.shooting:
+            from .field_solve import solve_shooting
+
+            return solve_shooting(sub)
         return solve_direct(sub, transcription=self.transcription(sub))
 
     def solve(self, previous: Any, t: float, p: np.ndarray, v: np.ndarray, Sigma: np.ndarray) -> Any:
@@ -236,6 +254,8 @@ class Replanner:
         t_end, K = self.window(t)
         relaxed: dict[str, float] = {}
         sub = window_problem(self.problem, t, t_end, p, v, Sigma, K, relaxed=relaxed)
+        if self.shooting:
+            return self._solve_shooting(sub, previous, t, t_end, K)
         tr = self.transcription(sub)  # built before the flight by prepare(): not part of the re-solve time
         start = time.perf_counter()
         init: Any = None
@@ -250,4 +270,24 @@ class Replanner:
         elapsed = time.perf_counter() - start
         iterations = sum(step.iterations for step in new.homotopy)
         self.records.append(ReplanRecord(t, t_end, K, iterations, elapsed, new.success, relaxed))
+        return new
+
+    def _solve_shooting(self, sub: Problem, previous: Any, t: float, t_end: float, K: int) -> Any:
+        """A field's window solved by shooting (docs/theory/path_constraints.md §5.3).
+
+        ``shifted`` starts the ε = 1 solve from the previous plan's controls at the same times (held at its last
+        node past its end), ``reused`` from them node by node, ``cold`` runs the coarse ε-homotopy.
+        """
+        from dataclasses import replace
+
+        from .field_solve import solve_shooting
+
+        start = time.perf_counter()
+        init = None if self.warm_start == "cold" else previous
+        if init is not None and self.warm_start == "reused":  # its k-th node's control at the window's k-th node
+            init = replace(init, t_u=np.linspace(t, t_end, len(init.t_u)))
+        new = solve_shooting(sub, init=init)
+        elapsed = time.perf_counter() - start
+        iterations = sum(step.iterations for step in new.homotopy)
+        self.records.append(ReplanRecord(t, t_end, K, iterations, elapsed, new.success))
         return new

@@ -147,7 +147,10 @@ class ReplanResult(SimulationResult):
         for i in range(ds.sizes["sensor"]):
             ax.plot(*ds["p"].values[0, :, i].T, "k", lw=2.0, label="flown (run 0)" if i == 0 else None)
         locs = np.asarray(ds.attrs["process_locations"]).reshape(-1, 2)
-        ax.plot(*locs.T, "r*", ms=12, label="process locations")
+        if ds.attrs.get("process_field", 0):
+            ax.plot(*locs.T, ".", color="0.6", ms=4, label="field grid cells")
+        else:
+            ax.plot(*locs.T, "r*", ms=12, label="process locations")
         ax.set_aspect("equal")
         ax.set_xlabel("x (L)")
         ax.set_ylabel("y (L)")
@@ -174,9 +177,9 @@ def check_against_problem(config: ReplanScenario, source: Path) -> Any:
     except ConfigError as err:
         raise ConfigError(f"{source}: problem: {err}") from None
     span = problem.horizon.tf - problem.horizon.t0
-    if problem.solver.method != "direct":
-        raise ConfigError(f"{source}: problem: re-planning solves by direct collocation; the problem's "
-                          f"solver.method is {problem.solver.method!r}")  # fmt: skip
+    if problem.solver.method not in ("direct", "shooting"):
+        raise ConfigError(f"{source}: problem: re-planning solves by direct collocation (or a field's shooting); the "
+                          f"problem's solver.method is {problem.solver.method!r}")  # fmt: skip
     if config.replan.length is not None and config.replan.length > span:
         raise ConfigError(f"{source}: replan.length: expected a window within the horizon, ≤ tf − t0 = {span:g}, "
                           f"got {config.replan.length:g}")  # fmt: skip
@@ -226,6 +229,10 @@ def _violations(flown: dict[str, dict[str, float]]) -> str:
     return "; ".join(parts)
 
 
+#: result.nc holds the full Σ(t) up to this many states, the variances beyond (as a field solution's file)
+FULL_SIGMA_STATES = 25
+
+
 def _dataset(problem: Any, flights: list[Any]) -> Any:
     """``result.nc``: every closed-loop run's flown path, Σ, cost and plans, with CF names and units."""
     import xarray as xr
@@ -236,10 +243,16 @@ def _dataset(problem: Any, flights: list[Any]) -> Any:
     def attrs(long_name: str, units: str) -> dict[str, str]:
         return {"long_name": long_name, "units": units}
 
+    if problem.n <= FULL_SIGMA_STATES:
+        sigma = {"Sigma": (("run", "time", "row", "col"), np.stack([f.Sigma for f in flights]),
+                           attrs("filter error covariance along the flown path", u.of(state=2)))}  # fmt: skip
+    else:  # a large field: its variance map (as a field solution's sigma_diag)
+        sigma = {"sigma_diag": (("run", "time", "state"), np.stack([np.diagonal(f.Sigma, axis1=1, axis2=2)
+                                                                    for f in flights]),
+                                attrs("filter error variance of each state along the flown path", u.of(state=2)))}
     data: dict[str, Any] = {
         "p": (("run", "time", "sensor", "xy"), np.stack([f.p for f in flights]), attrs("flown sensor position", L)),
-        "Sigma": (("run", "time", "row", "col"), np.stack([f.Sigma for f in flights]),
-                  attrs("filter error covariance along the flown path", u.of(state=2))),
+        **sigma,
         "cost": (("run",), np.array([f.cost for f in flights]), attrs("realised cost J of the closed loop",
                                                                       u.of(cost=1))),
         **_plan_variables(flights, L, T),
@@ -250,9 +263,10 @@ def _dataset(problem: Any, flights: list[Any]) -> Any:
         "sensor": ("sensor", [s.name for s in problem.sensors], {"long_name": "sensor name"}),
         "xy": ("xy", ["x", "y"], {"long_name": "planar component"}),
     }
-    locations = np.asarray(problem.process.locations, float).ravel()
-    return xr.Dataset(data, coords=coords, attrs={"title": f"re-planning of {problem.name}",
-                                                   "process_locations": locations})  # fmt: skip
+    attributes = {"title": f"re-planning of {problem.name}",
+                  "process_locations": problem.matrices()["locations"].ravel(),  # a field's: its grid cells' centres
+                  "process_field": int(problem.process.field is not None)}  # fmt: skip
+    return xr.Dataset(data, coords=coords, attrs=attributes)
 
 
 def _plan_variables(flights: list[Any], L: str, T: str) -> dict[str, Any]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 import yaml
 from reference_problems import PROBLEMS
@@ -62,6 +63,37 @@ def test_receding_replan_file_stores_every_runs_plans_with_cf_attributes(tmp_pat
         assert ds["plan_instant"].values.tolist() == [[0.0, 2.5, 5.0, 7.5]] * 2
         # a receding plan made at t covers [t, min(t + 5, 10)]
         assert ds["plan_time"].values[0, :, -1].tolist() == pytest.approx([5.0, 7.5, 10.0, 10.0])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("grid, variance", [((2, 2), "Sigma"), ((6, 5), "sigma_diag")])
+def test_a_field_replan_file_is_solved_by_shooting_and_stores_its_covariance_as_a_field_solution_does(
+    tmp_path, grid, variance
+) -> None:
+    # re-planning a field was refused ("re-planning solves by direct collocation"); now its windows are shot
+    import xarray as xr
+    from short_runs import field_problem
+
+    problem = field_problem(grid=grid, sensors=2, shooting={"intervals": 20, "coarse_intervals": 10})
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump(problem))
+    scenario = {"kind": "replan", "problem": "p.yaml", "replan": {"every": 1.25},
+                "disturbance": {"drift": [0.3, -0.2], "force_noise_std": 0.05, "seed": 1},
+                "monte_carlo": {"runs": 2, "time_step": 0.05}}  # fmt: skip
+    path = tmp_path / "replan.yaml"
+    path.write_text(yaml.safe_dump(scenario))
+    out = tmp_path / "out"
+    assert cli.main(["replay", str(path), "--out", str(out)]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["replan_failures"] == 0 and s["replan_iterations"]["max"] > 0
+    assert s["closed_loop"]["cost_mean"] < s["no_control"]["cost_mean"]
+    n = grid[0] * grid[1]
+    with xr.open_dataset(out / "result.nc", engine="h5netcdf") as ds:
+        assert variance in ds and ds["plan_instant"].values[0].tolist() == [0.0, 1.25, 2.5, 3.75]
+        values = ds[variance].values
+        diag = values if variance == "sigma_diag" else values.diagonal(axis1=2, axis2=3)
+        assert diag.shape == (2, 101, n) and np.all(diag > 0)
+        assert np.asarray(ds.attrs["process_locations"]).size == 2 * n and ds.attrs["process_field"] == 1
+    assert (out / "replan.png").stat().st_size > 0
 
 
 @pytest.mark.parametrize(

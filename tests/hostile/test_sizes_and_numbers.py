@@ -16,6 +16,9 @@ import pytest
 import yaml
 from hostile.harness import EITHER, GOOD, attack
 from hostile.inputs import KINDS, small_problem
+from reference_problems import PROBLEMS
+
+FIELD_10X10 = PROBLEMS / "field_mapping_10x10.yaml"
 
 pytestmark = pytest.mark.slow  # each case starts a Python process (~1 s)
 
@@ -176,6 +179,11 @@ CASES: dict[str, Case] = {
     "replan 4e4 re-solves in 30 s": Case("replan", _both(_set("monte_carlo", {"runs": 200, "time_step": 0.05}),
                                                          _set("replan.every", 0.05)), 2,
                                          ("too long", "re-solves", "replan.every"), ("--max-time", "30s")),
+    # a field is re-planned by shooting since stop 34: a 10 × 10 field's window solves are counted (≥ 20 fine
+    # iterations of its K = 100 grid each, on top of the full solve), 400 re-solves refused under 60 s
+    "replan a 10 × 10 field every 0.05 T": Case("replan", _both(_set("problem", str(FIELD_10X10)),
+                                                                _set("replan.every", 0.05)), 2,
+                                                ("too long", "re-solves of the shooting NLP"), ("--max-time", "60s")),
     "replan every 1e-300": Case("replan", _set("replan.every", 1e-300), 2, ("replan.every",)),
     "replan receding without length": Case("replan", _set("replan.horizon", "receding"), 2, ("replan.length",)),
     "replan length 20 > horizon": Case("replan", _set("replan", {"every": 1.0, "horizon": "receding", "length": 20.0}),
