@@ -22,7 +22,15 @@ from .path_constraints import margins
 from .problem import Problem
 from .replan_window import Replanner, ReplanRecord
 
-__all__ = ["Disturbance", "FlightResult", "riccati_step", "fly", "replan_monte_carlo"]
+__all__ = [
+    "Disturbance",
+    "FlightResult",
+    "MAX_RK4_SUBSTEPS",
+    "implicit_riccati_step",
+    "riccati_step",
+    "fly",
+    "replan_monte_carlo",
+]
 
 
 @dataclass(frozen=True)
@@ -63,6 +71,35 @@ def _plan_record(t: float, plan: Any) -> tuple[float, np.ndarray, np.ndarray]:
     return t, times, plan.sample(times).p
 
 
+#: RK4 substeps of a flight step at most; a stiffer step is taken by :func:`implicit_riccati_step`
+MAX_RK4_SUBSTEPS = 16
+
+
+def implicit_riccati_step(A: np.ndarray, W: np.ndarray, Sigma: np.ndarray, S: np.ndarray, dt: float) -> np.ndarray:
+    """Σ(t + dt) by one implicit (backward) Euler step of the Riccati equation, for any stiffness.
+
+    Σ₁ = Σ₀ + dt (AΣ₁ + Σ₁A' + W − Σ₁SΣ₁) is the algebraic Riccati equation
+    (A − I/2dt)Σ₁ + Σ₁(A − I/2dt)' − Σ₁ S Σ₁ + W + Σ₀/dt = 0, whose stabilising solution (scipy's
+    ``solve_continuous_are`` with S = LL', L its symmetric square root) is symmetric positive definite and, as
+    dt·‖ΣS‖ → ∞, the steady state under S: first order in dt, L-stable.
+
+    Parameters
+    ----------
+    A, W, Sigma, S : ndarray, shape (n, n)
+        Process matrix (1/T), noise intensity (state²/T), Σ(t) (state²), information C'R⁻¹C at t + dt.
+    dt : float
+        Step (T).
+    """
+    from scipy.linalg import solve_continuous_are
+
+    n = len(Sigma)
+    values, vectors = np.linalg.eigh(0.5 * (S + S.T))
+    root = (vectors * np.sqrt(np.clip(values, 0.0, None))) @ vectors.T
+    shifted = A.T - np.eye(n) / (2.0 * dt)
+    out = solve_continuous_are(shifted, root, W + Sigma / dt, np.eye(n))
+    return 0.5 * (out + out.T)
+
+
 def riccati_step(A: np.ndarray, W: np.ndarray, Sigma: np.ndarray, infos: list[np.ndarray], dt: float) -> np.ndarray:
     """Σ(t + dt) of Σ' = AΣ + ΣA' + W − Σ S(t) Σ by RK4 on its linear (Möbius) form.
 
@@ -71,7 +108,8 @@ def riccati_step(A: np.ndarray, W: np.ndarray, Sigma: np.ndarray, infos: list[np
     square root of the Riccati equation's stiffness 2‖ΣS‖, and the step is cut into ⌈ρ dt⌉ RK4 substeps
     (one when ρ dt ≤ 1, as on the shipped problems). Explicit Runge–Kutta on Σ itself overflowed to NaN within a
     few steps when precise sensors met a large Σ; this stays positive definite. One substep is O(dt⁴) accurate
-    with the three given S; several interpolate S linearly between them (O(dt²) in S's change, stable).
+    with the three given S; several interpolate S linearly between them (O(dt²) in S's change, stable). Beyond
+    :data:`MAX_RK4_SUBSTEPS` the step is :func:`implicit_riccati_step` (first order, any stiffness).
 
     Parameters
     ----------
@@ -87,6 +125,8 @@ def riccati_step(A: np.ndarray, W: np.ndarray, Sigma: np.ndarray, infos: list[np
     norm_S = max(float(np.linalg.norm(S)) for S in infos)
     rate = float(np.linalg.norm(A)) + float(np.sqrt(np.linalg.norm(W) * norm_S))
     substeps = max(1, int(np.ceil(rate * dt)))
+    if substeps > MAX_RK4_SUBSTEPS:  # stiffer still: one L-stable step, whatever the stiffness
+        return implicit_riccati_step(A, W, Sigma, infos[2], dt)
     h = dt / substeps
 
     def info(tau: float) -> np.ndarray:  # S at fraction tau of the step
