@@ -52,7 +52,9 @@ from .information_model import (
 from .noise_config import CooperativeNoise
 from .rollouts import (
     OUTPUTS,
+    check_measurement,
     check_prior,
+    measurement_is_regular,
     prior_is_regular,
     process_is_regular,
     rollout_casadi,
@@ -395,8 +397,11 @@ def run_cooperative_filter(
     closed_loop = hessians is not None and callable(hessians)
     single = measurements.ndim == 2 and positions.ndim == 3 and x0.ndim == 1 and P0.ndim == 2
     check_prior(P0)
-    # the compiled rollout is in information form: a singular prior needs a positive definite M after step 0
-    informative = prior_is_regular(P0) or process_is_regular(noise.process)
+    # the compiled rollout is in information form: a singular prior needs a positive definite M after step 0,
+    # and the measurements' weight (DUD' + R)⁻¹ a regular R
+    informative = (prior_is_regular(P0) or process_is_regular(noise.process)) and measurement_is_regular(
+        noise.measurement
+    )
     if engine == "auto":
         engine = "casadi" if single and not closed_loop and informative else "numpy"
     if engine == "casadi" and (closed_loop or not single):
@@ -407,6 +412,7 @@ def run_cooperative_filter(
     hessian_array = np.zeros(positions.shape[:-2] + (2, 2)) if hessians is None else np.asarray(hessians, float)
     if engine == "casadi":
         check_prior(P0, noise.process)
+        check_measurement(noise.measurement)
     if engine == "casadi" or (positions.ndim == 3 and P0.ndim == 2):
         model = model_sequence(positions, hessian_array, noise)
         roll, rollout = (rollout_casadi, "compiled") if engine == "casadi" else (rollout_shared, "shared")
@@ -414,6 +420,7 @@ def run_cooperative_filter(
         centers = model["centers"]
     else:
         check_prior(P0, noise.process)  # the per-run rollout is in information form
+        check_measurement(noise.measurement)
         out = rollout_components(positions, hessian_array, noise, measurements, x0, P0, outputs)
         centers, rollout = out["centers"], "components"
     return CooperativeFilterResult(

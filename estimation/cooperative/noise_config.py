@@ -46,6 +46,9 @@ class CooperativeNoise:
         R = np.asarray(self.measurement, dtype=float)
         if R.ndim > 2:
             raise ValueError(f"measurement covariance R: expected a scalar, (N,) or (N, N), got shape {R.shape}")
+        for name, matrix in (("process covariance M", M), ("hessian_error covariance U", U),
+                             ("measurement covariance R", R if R.ndim == 2 else np.diag(np.atleast_1d(R)))):
+            _check_covariance(name, matrix)
         object.__setattr__(self, "process", M)
         object.__setattr__(self, "hessian_error", U)
         object.__setattr__(self, "measurement", R)
@@ -87,3 +90,16 @@ class NoiseConfig(StrictModel):
     def to_noise(self) -> CooperativeNoise:
         """The corresponding :class:`CooperativeNoise`."""
         return CooperativeNoise.from_sigmas(self.sigma_process, self.sigma_measurement, self.sigma_hessian)
+
+
+def _check_covariance(name: str, matrix: np.ndarray) -> None:
+    """Raise ``ValueError`` unless ``matrix`` is a finite, square, symmetric positive semidefinite matrix."""
+    if matrix.shape[0] != matrix.shape[1] or not np.all(np.isfinite(matrix)):
+        raise ValueError(f"{name}: expected a finite square matrix, got shape {matrix.shape}")
+    scale = max(1.0, float(np.abs(matrix).max(initial=0.0)))
+    if np.abs(matrix - matrix.T).max(initial=0.0) > 1e-12 * scale:
+        raise ValueError(f"{name}: expected a symmetric matrix")
+    smallest = float(np.linalg.eigvalsh(0.5 * (matrix + matrix.T))[0]) if matrix.size else 0.0
+    if smallest < -1e-12 * scale:
+        raise ValueError(f"{name}: expected a positive semidefinite matrix, smallest eigenvalue {smallest:g}")
+

@@ -41,6 +41,8 @@ __all__ = [
     "prior_is_regular",
     "process_is_regular",
     "check_prior",
+    "measurement_is_regular",
+    "check_measurement",
     "OUTPUTS",
 ]
 
@@ -245,6 +247,30 @@ def prior_is_regular(P0: np.ndarray) -> bool:
 def process_is_regular(process: np.ndarray) -> bool:
     """True when the process noise ``M`` is positive definite (every prior after step 0 is then invertible)."""
     return bool(np.linalg.eigvalsh(0.5 * (process + process.T))[0] > 0)
+
+
+def measurement_is_regular(measurement: np.ndarray | float) -> bool:
+    """True when ``R`` (scalar, (N,) or (N, N)) is positive definite to working precision.
+
+    The information-form rollouts weight the measurements by ``(DUD' + R)⁻¹``; ``D`` has rank ≤ 3 (two of its
+    four columns are equal), so with a singular ``R`` (a platform measuring without noise) that matrix is
+    singular for some formation, and for every one with N > 3.
+    """
+    R = np.asarray(measurement, dtype=float)
+    if R.ndim < 2:
+        return bool(np.all(R > 0))
+    eigenvalues = np.linalg.eigvalsh(0.5 * (R + R.T))
+    return bool(eigenvalues[0] > 1e-14 * eigenvalues[-1])
+
+
+def check_measurement(measurement: np.ndarray | float) -> None:
+    """Raise ``ValueError`` unless the information-form rollouts can weight the measurements (``R`` regular)."""
+    if not measurement_is_regular(measurement):
+        raise ValueError(
+            "measurement covariance R: singular (a platform measuring without noise): the information-form "
+            "rollouts need DUD' + R positive definite (engine='numpy' with positions shared by all runs, or "
+            "CooperativeKalmanFilter, run the covariance form)"
+        )
 
 
 def check_prior(P0: np.ndarray, process: np.ndarray | None = None) -> None:

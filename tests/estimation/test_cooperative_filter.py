@@ -133,6 +133,42 @@ def test_a_known_initial_value_runs_on_every_engine() -> None:
         run_cooperative_filter(positions, meas[1], noise, x0, -P0)
 
 
+def test_sensors_without_measurement_noise_are_fused_by_the_covariance_form_or_refused() -> None:
+    # R = 0 (audit): the default engine raised LinAlgError and the per-run rollout returned NaN at every step with
+    # only a RuntimeWarning; N = 3 with R = U = 0 raised ZeroDivisionError. S = CPC' + DUD' is positive
+    # definite, so the covariance form is well defined: checked against a plain Kalman filter written here
+    K, B = 30, 2
+    rng = np.random.default_rng(8)
+    positions = _trajectory(K)
+    meas = rng.normal(size=(B, K, 4))
+    noise = CooperativeNoise(1e-2 * np.eye(3), 0.0, 1e-2 * np.eye(4))
+    x0, P0 = np.array([0.5, -0.2, 0.1]), np.eye(3)
+    auto = run_cooperative_filter(positions, meas[0], noise, x0, P0)
+    assert auto.meta["rollout"] == "shared"  # not the information form
+    centers = formation_center(positions)
+    x, P = x0.copy(), P0.copy()
+    for k in range(K):
+        if k > 0:  # zero Hessian estimates: no drift input
+            F = transition_matrix(centers[k] - centers[k - 1])
+            x, P = F @ x, F @ P @ F.T + noise.process
+        C, D = taylor_matrices(positions[k])
+        S = C @ P @ C.T + D @ noise.hessian_error @ D.T
+        gain = P @ C.T @ np.linalg.inv(S)
+        x, P = x + gain @ (meas[0, k] - C @ x), (np.eye(3) - gain @ C) @ P
+    # one filter, two codes: round-off of 30 steps with cond(S) ≲ 1e3
+    np.testing.assert_allclose(auto.states[-1], x, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(auto.covariances[-1], P, rtol=1e-10, atol=1e-12)
+    batched = np.broadcast_to(positions, (B,) + positions.shape)
+    for engine, where in (("casadi", positions), ("auto", batched)):  # information forms: a clear refusal
+        with pytest.raises(ValueError, match="measurement covariance R: singular"):
+            run_cooperative_filter(where, meas[0] if where is positions else meas, noise, x0, P0, engine=engine)
+    three = CooperativeNoise(1e-2 * np.eye(3), 0.0, np.zeros((4, 4)))
+    with pytest.raises(ValueError, match="measurement covariance R: singular"):
+        run_cooperative_filter(batched[..., :3, :], meas[..., :3], three, x0, P0)
+    with pytest.raises(ValueError, match="measurement covariance R: expected a positive semidefinite"):
+        CooperativeNoise(np.eye(3), [0.1, -0.1, 0.1, 0.1], np.eye(4))
+
+
 def test_coincident_platforms_are_refused_by_the_coloured_filter() -> None:
     positions = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [0.0, 1.0]])[None] + np.linspace(0, 1, 5)[:, None, None]
     noise = CooperativeNoise.from_sigmas(0.1, 0.1, 0.1)
