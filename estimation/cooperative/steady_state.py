@@ -60,7 +60,7 @@ class SteadyState:
     Attributes
     ----------
     positions : ndarray, shape (N, 2)
-        Platform offsets from the centre (L).
+        Platform positions as given (L); their mean is the formation centre.
     prior, posterior : ndarray, shape (3, 3)
         ``P∞(−) = P∞(+) + M`` and ``P∞(+)``.
     gain : ndarray, shape (3, N)

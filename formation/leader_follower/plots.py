@@ -127,8 +127,8 @@ def plot_reference_point_errors(result: xr.Dataset):  # noqa: ANN201
     e0 = float(np.hypot(first["xe"].values[0], first["ye"].values[0]))
     if e0 > 0:  # the exact decay of Control 1 with exact sensing, for comparison
         ax_n.semilogy(t, e0 * np.exp(-gain * t), "k:", lw=1.2, label=f"‖e(0)‖ exp(−kt), k = {gain:g} 1/s")
-    ax_x.set_ylabel("along the heading, x_e (m)")
-    ax_y.set_ylabel("across the heading, y_e (m)")
+    ax_x.set_ylabel("world x component, x_e (m)")
+    ax_y.set_ylabel("world y component, y_e (m)")
     ax_n.set_ylabel("distance ‖(x_e, y_e)‖ (m)")
     ax_n.set_xlabel("time (s)")
     for ax in (ax_x, ax_y, ax_n):

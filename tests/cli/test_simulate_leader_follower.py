@@ -55,6 +55,15 @@ def test_control1_vs_control2_end_to_end(tmp_path: Path) -> None:
     xe = ds["xe"].sel(run="control1", follower=2).values
     # eq. 13 through the CLI: rtol = 1e-10 in the file, positions ≲ 20 m → 10·rtol·20 m (see controls tests)
     assert np.max(np.abs(xe - xe[0] * np.exp(-t))) < 2e-8
+    # xe, ye are the world-frame offset of eq. leader_follower.3 (they were labelled along/across the heading)
+    run = ds.sel(run="control2")
+    x, y, phi = (run[k].values for k in ("x", "y", "phi"))
+    d0, b0 = run["d0"].values[0], run["beta0"].values[0]
+    assert np.ptp(phi[1]) > 0.1  # the follower turns: the two frames differ
+    # the same formula on the stored states: round-off of positions ≲ 20 m
+    np.testing.assert_allclose(run["xe"].values[0], x[1] + d0 * np.cos(phi[1] + b0) - x[0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(run["ye"].values[0], y[1] + d0 * np.sin(phi[1] + b0) - y[0], rtol=0, atol=1e-12)
+    assert "world x" in ds["xe"].attrs["long_name"] and "world y" in ds["ye"].attrs["long_name"]
     summary = json.loads((out / "summary.json").read_text())
     assert summary["runs"]["control2"]["followers"]["2"]["bearing_error_monotone"] is True
     assert summary["runs"]["control1"]["followers"]["2"]["bearing_error_monotone"] is False
