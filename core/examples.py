@@ -43,6 +43,7 @@ EXAMPLES: tuple[Example, ...] = (
     Example("replan_drift", "replay", "the default example re-planned every 0.5 T in a current, vs the open loop"),
     Example("field_mapping_5x5", "solve", "four gliders map a 5 × 5 correlated field (25 states, shooting)"),
     Example("field_mapping_10x10", "solve", "four gliders map a 10 × 10 correlated field (100 states, shooting)"),
+    Example("field_mapping_island", "solve", "the 5 × 5 field around an island, in a workspace: path constraints"),
     Example("sweep_hussein2008", "sweep", "sweep of the default example over the control weight and the start"),
     Example("formation_cross", "steady-state", "cross formation: steady-state covariance minimised on a bound"),
     Example("formation_cross_equal_sides", "steady-state", "the cross formation with a = b imposed (a saddle)"),

@@ -28,6 +28,7 @@ from ..core.config import MAX_MAGNITUDE, MIN_MAGNITUDE, InvalidValue, PositiveFl
 
 __all__ = [
     "ShootingOptions",
+    "flown_states",
     "MAX_FIELD_STATES",
     "MAX_SUBSTEPS",
     "FieldKernel",
@@ -326,3 +327,29 @@ class FieldProcess:
         """Per-state values (..., n) as (..., ny, nx) for maps."""
         nx, ny = self.spec.grid
         return np.asarray(values).reshape(*np.shape(values)[:-1], ny, nx)
+
+
+def flown_states(t: np.ndarray, p: np.ndarray, v: np.ndarray, u: np.ndarray,
+                 times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """The sensors under controls linear between the nodes, exactly (eq. field.7): p, v, u at ``times``.
+
+    Parameters
+    ----------
+    t : ndarray, shape (K + 1,)
+        Node times (T), increasing.
+    p, v, u : ndarray, shape (K + 1, N, 2)
+        Positions (L), velocities (L/T) and controls (L/T²) at the nodes.
+    times : ndarray, shape (S,)
+        Times (T) in [t[0], t[-1]].
+
+    Returns
+    -------
+    p, v, u : ndarray, shape (S, N, 2)
+    """
+    k = np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 2)
+    h = (t[k + 1] - t[k])[:, None, None]
+    s = (times - t[k])[:, None, None]
+    tau = s / h
+    u0, du = u[k], u[k + 1] - u[k]
+    return (p[k] + s * v[k] + h**2 * (u0 * tau**2 / 2 + du * tau**3 / 6), v[k] + h * (u0 * tau + du * tau**2 / 2),
+            u0 + du * tau)  # fmt: skip

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from .solution import Solution
+from .zone_plots import constraint_corners, draw_constraints
 
 __all__ = ["FIELD_FIGURES", "plot_variance_maps", "plot_trace"]
 
@@ -34,8 +35,10 @@ def plot_variance_maps(solution: Solution):  # noqa: ANN201  (matplotlib Figure)
     if "sigma_diag_tf" in solution.baseline:
         panels.append((f"t = {t[-1]:g}: no control", np.asarray(solution.baseline["sigma_diag_tf"]), False))
     vmax = float(diag.max())
-    # one frame for every panel: the field and the paths (which may leave it), so the panels are drawn alike
-    xs, ys = np.r_[x0, x1, p[..., 0].ravel()], np.r_[y0, y1, p[..., 1].ravel()]
+    # one frame for every panel: the field, the paths (which may leave it) and the constraints' zones, so the
+    # panels are drawn alike
+    corners = constraint_corners(solution.problem)
+    xs, ys = np.r_[x0, x1, p[..., 0].ravel(), corners[:, 0]], np.r_[y0, y1, p[..., 1].ravel(), corners[:, 1]]
     pad = 0.02 * max(np.ptp(xs), np.ptp(ys))
     xlim, ylim = (xs.min() - pad, xs.max() + pad), (ys.min() - pad, ys.max() + pad)
     height = float(np.clip(4.0 * np.ptp(ylim) / np.ptp(xlim), 2.0, 6.0)) + 1.0  # titles and x label: 1 inch
@@ -45,6 +48,7 @@ def plot_variance_maps(solution: Solution):  # noqa: ANN201  (matplotlib Figure)
     for ax, (title, values, paths) in zip(axes[0], panels, strict=True):
         mesh = ax.pcolormesh(xe, ye, field.to_grid(values), vmin=0.0, vmax=vmax, cmap="viridis", shading="flat")
         ax.plot(*field.locations.T, "k.", ms=2, alpha=0.5)
+        draw_constraints(ax, solution.problem.constraints)
         for i, sensor in enumerate(solution.problem.sensors):
             ax.plot(p[0, i, 0], p[0, i, 1], "wo", ms=5, mec="k", zorder=3)
             if paths:

@@ -15,9 +15,9 @@ import casadi as ca
 import numpy as np
 
 from ..core.files import write_figure
-from .path_constraints import KeepOutDisc, PathConstraints
 from .registries import NOISE_MODELS
 from .solution import Solution
+from .zone_plots import constraint_corners, draw_constraints
 
 __all__ = [
     "FIGURES",
@@ -48,44 +48,6 @@ def effective_noise(solution: Solution, sensor: int, points: np.ndarray) -> np.n
     return 1.0 / np.asarray(f(points.T)).ravel()
 
 
-def draw_constraints(ax: Any, constraints: PathConstraints | None) -> None:
-    """Draw keep-out zones (hatched) and the workspace (dashed) on a matplotlib axis of the plane."""
-    if constraints is None:
-        return
-    from matplotlib.patches import Circle, Polygon, Rectangle
-
-    style = {"facecolor": "0.55", "edgecolor": "k", "alpha": 0.6, "hatch": "//", "zorder": 3}
-    for k, zone in enumerate(constraints.keep_out):
-        label = "keep-out zones" if k == 0 else None
-        if isinstance(zone, KeepOutDisc):
-            ax.add_patch(Circle(tuple(zone.center), zone.radius, label=label, **style))
-        else:
-            ax.add_patch(Polygon(np.asarray(zone.polygon), closed=True, label=label, **style))
-    if constraints.workspace is not None:
-        w = constraints.workspace
-        ax.add_patch(
-            Rectangle(
-                (w.x[0], w.y[0]), w.x[1] - w.x[0], w.y[1] - w.y[0], fill=False, ls="--", ec="k", label="workspace"
-            )
-        )
-
-
-def _constraint_corners(problem: Any) -> np.ndarray:
-    """Points (M, 2) that the drawn zones and workspace reach: the shaded plane covers them."""
-    c = problem.constraints
-    if c is None:
-        return np.zeros((0, 2))
-    points = []
-    for zone in c.keep_out:
-        if isinstance(zone, KeepOutDisc):
-            points += [np.asarray(zone.center) + zone.radius * np.array(d) for d in ((-1, -1), (1, 1))]
-        else:
-            points += [np.asarray(v, float) for v in zone.polygon]
-    if c.workspace is not None:
-        points += [np.array([c.workspace.x[0], c.workspace.y[0]]), np.array([c.workspace.x[1], c.workspace.y[1]])]
-    return np.array(points, float).reshape(-1, 2)
-
-
 def _label(solution: Solution, **powers: int) -> str:
     return solution.problem.units.system().label(**powers)
 
@@ -98,7 +60,7 @@ def plot_paths(solution: Solution):  # noqa: ANN201  (matplotlib Figure)
     problem = solution.problem
     length = _label(solution, length=1)
     locs = problem.matrices()["locations"]
-    pts = np.concatenate([solution.p.reshape(-1, 2), locs, _constraint_corners(problem)])
+    pts = np.concatenate([solution.p.reshape(-1, 2), locs, constraint_corners(problem)])
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     pad = 0.15 * max(float((hi - lo).max()), 1.0)
     xs = np.linspace(lo[0] - pad, hi[0] + pad, 160)

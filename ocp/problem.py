@@ -269,10 +269,8 @@ class Problem(StrictModel):
                 )
         names = [s.name for s in self.sensors]
         if self.constraints is not None:
-            if self.solver.method != "direct":
+            if self.solver.method in ("indirect", "both"):
                 why = "the indirect method has no state-constrained arcs; remove constraints or use method 'direct'"
-                if self.solver.method == "shooting":
-                    why = "a field's shooting method keeps terminal states and |u| ≤ u_max only; remove constraints"
                 raise InvalidValue(
                     "constraints", f"expected no path constraints with solver.method {self.solver.method!r}: {why}"
                 )

@@ -26,6 +26,7 @@ import numpy as np
 from ..core.interrupts import raise_if_interrupted
 from .direct.iteration_limit import IterationLimit
 from .field import shooting_substeps
+from .field_constraints import path_row_function
 from .mobius import mobius_rk4_step
 from .problem import Problem
 
@@ -98,6 +99,25 @@ class FieldShooting:
             uk, uk1 = U[:, k], U[:, k + 1]
             pos.append(pos[-1] + h * vel[-1] + h**2 * (uk / 3 + uk1 / 6))
             vel.append(vel[-1] + h * (uk + uk1) / 2)
+        # with path constraints the node states are NLP variables too (scaled by the length and speed units),
+        # tied to the controls by eq. field.7 as equality rows: a node's path rows then depend on its own four
+        # numbers, not on every earlier control (5 × 5 field, 26 rows per node on K = 100: 247 200 Jacobian
+        # non-zeros, 0.26 s an iteration against 0.035 s without constraints)
+        self.lifted = problem.constraints is not None
+        x = w
+        defects: list[Any] = []
+        if self.lifted:
+            length, speed = self.length_scale(), self.length_scale() / T
+            X = ca.MX.sym("X", 4 * N, K)
+            self.lift = ca.Function("lift", [w, P], [ca.vertcat(*[ca.vertcat(pos[k] / length, vel[k] / speed)
+                                                                    for k in range(1, K + 1)])])  # fmt: skip
+            pos = [pos[0]] + [X[: 2 * N, k] * length for k in range(K)]
+            vel = [vel[0]] + [X[2 * N :, k] * speed for k in range(K)]
+            for k in range(K):
+                uk, uk1 = U[:, k], U[:, k + 1]
+                defects += [(pos[k + 1] - pos[k] - h * vel[k] - h**2 * (uk / 3 + uk1 / 6)) / length,
+                            (vel[k + 1] - vel[k] - h * (uk + uk1) / 2) / speed]  # fmt: skip
+            x = ca.vertcat(w, ca.vec(X))
         F = self._interval_function()
         Z = ca.DM(self.Linv @ mats["Sigma0"] @ self.Linv.T).reshape((n * n, 1))
         Zs, running, energy = [Z], 0, 0
@@ -110,22 +130,33 @@ class FieldShooting:
         energy = 0.5 * problem.cost.alpha * energy
         phi = ca.sum1(ca.sum2(ca.DM(self.L.T @ self.M @ self.L) * ca.reshape(Z, n, n)))  # Tr[MΣ] = Tr[L'ML Z]
         objective = (eps * phi + running + energy) / cost_scale
-        g, self.lbg, self.ubg = self._constraints(pos[K], vel[K], U, u_scale)
-        self.nlp = {"x": w, "p": P, "f": objective, "g": g}
-        self.cost_terms = ca.Function("cost_terms", [w, P], [phi, running + energy, energy])
-        self.trajectory = ca.Function("trajectory", [w, P], [ca.horzcat(*Zs), ca.horzcat(*pos), ca.horzcat(*vel), U])
+        g, self.lbg, self.ubg = self._constraints(pos, vel, U, u_scale)
+        if defects:  # the kinematics first: equality rows
+            g = ca.vertcat(*defects, g)
+            self.lbg, self.ubg = np.r_[np.zeros(4 * N * K), self.lbg], np.r_[np.zeros(4 * N * K), self.ubg]
+            t0, names = problem.horizon.t0, [sensor.name for sensor in problem.sensors]
+            self.row_labels = [(f"kinematics of {'pv'[j // (2 * N)]} of sensor {names[(j % (2 * N)) // 2]}",
+                                t0 + (k + 1) * h, length if j < 2 * N else speed, None, None)
+                               for k in range(K) for j in range(4 * N)] + self.row_labels  # fmt: skip
+        self.nlp = {"x": x, "p": P, "f": objective, "g": g}
+        self._rows = ca.Function("rows", [x, P], [g])
+        self._cost_terms = ca.Function("cost_terms", [x, P], [phi, running + energy, energy])
+        self.trajectory = ca.Function("trajectory", [x, P], [ca.horzcat(*Zs), ca.horzcat(*pos), ca.horzcat(*vel), U])
         self.solvers: dict[float, Any] = {}
         self.interrupt: IterationLimit | None = None  # the solvers' iteration callback (created with the first)
         self.build_time_s = time.perf_counter() - t_build
 
-    def _constraints(self, pK: Any, vK: Any, U: Any, u_scale: Any) -> tuple[Any, np.ndarray, np.ndarray]:
+    def _constraints(self, pos: list[Any], vel: list[Any], U: Any, u_scale: Any) -> tuple[Any, np.ndarray, np.ndarray]:
+        """Terminal states, |u| ≤ u_max at the nodes and the path constraints at nodes 1 … K (eq. path.1–5)."""
         g: list[Any] = []
         lbg: list[float] = []
         ubg: list[float] = []
-        # each row: what, time, its scale, and u_max for a |u| ≤ u_max row (its size is then |u| − u_max)
-        self.row_labels: list[tuple[str, float, float, float | None]] = []
+        # each row: what, time, its scale, u_max for a |u| ≤ u_max row (its size is then |u| − u_max) and the
+        # group of a path-constraint row (its size is then natural_violation's)
+        self.row_labels: list[tuple[str, float, float, float | None, str | None]] = []
         length = self.length_scale()
         t0, tf = self.problem.horizon.t0, self.problem.horizon.tf
+        pK, vK = pos[-1], vel[-1]
         for i, s in enumerate(self.problem.sensors):
             for key, end, scale in (("p", pK, length), ("v", vK, length / (tf - t0))):
                 target = None if s.terminal is None else getattr(s.terminal, key)
@@ -133,30 +164,56 @@ class FieldShooting:
                     g.append((end[2 * i : 2 * i + 2] - ca.DM(target)) / scale)
                     lbg += [0.0, 0.0]
                     ubg += [0.0, 0.0]
-                    self.row_labels += [(f"terminal {key}[{c}] of sensor {s.name}", tf, scale, None) for c in range(2)]
+                    self.row_labels += [(f"terminal {key}[{c}] of sensor {s.name}", tf, scale, None, None)
+                                        for c in range(2)]  # fmt: skip
             if s.u_max is not None:
                 for k in range(self.K + 1):
-                    g.append((ca.sumsqr(U[2 * i : 2 * i + 2, k]) - s.u_max**2) / u_scale**2)
+                    # relative to the bound: (|u|² − u_max²)/u_scale² was −(u_max/u_scale)² where u_max ≫ u_scale, and a
+                    # bound that never binds (u_max = 1 for |u| ≤ 0.37) ran Ipopt to its iteration limit (first hour)
+                    g.append(ca.sumsqr(U[2 * i : 2 * i + 2, k]) / s.u_max**2 - 1.0)
                     lbg.append(-np.inf)
                     ubg.append(0.0)
-                    self.row_labels.append((f"|u| ≤ u_max of sensor {s.name}", t0 + k * self.h, 1.0, s.u_max))
+                    self.row_labels.append((f"|u| ≤ u_max of sensor {s.name}", t0 + k * self.h, 1.0, s.u_max, None))
+        self.path_groups, self.path_units = np.array([], dtype=str), np.zeros(0)  # the path rows, one instant
+        if self.problem.constraints is not None:
+            function, numbers, labels = path_row_function(self.problem.constraints, self.N)
+            params = ca.DM(np.r_[numbers, length, length / (tf - t0)])
+            names = [s.name for s in self.problem.sensors]
+            units = np.asarray(function(np.zeros(2 * self.N), np.zeros(2 * self.N), params)[1]).ravel()
+            for k in range(1, self.K + 1):  # node 0 is the initial state, checked when the file is read
+                g.append(function(pos[k], vel[k], params)[0])
+                for (group, what), unit in zip(labels, units, strict=True):
+                    self.row_labels.append((what.format(*names), t0 + k * self.h, float(unit), None, group))
+            self.path_groups = np.array([group for group, _ in labels])
+            self.path_units = units
+            lbg += [-np.inf] * (self.K * len(labels))
+            ubg += [0.0] * (self.K * len(labels))
         return (ca.vertcat(*g) if g else ca.MX(0, 1)), np.array(lbg), np.array(ubg)
 
     def worst_violation(self, g: np.ndarray, u_scale: float) -> dict[str, Any] | None:
         """The most violated constraint of the rows ``g`` of a solve, in physical units (None: there are none).
 
-        ``{constraint, time, violation}``: a terminal position (L) or velocity (L/T) off its target, or
-        |u| − u_max (L/T²) at a node; ``u_scale`` is the control scale of the solve's parameters.
+        ``{constraint, time, violation}``: a terminal position (L) or velocity (L/T) off its target,
+        |u| − u_max (L/T²) at a node, or a path constraint's violation at a node in its natural quantity (a
+        disc's depth, …: :func:`mobisense.ocp.direct.violations.natural_violation`); ``u_scale`` is the control
+        scale of the solve's parameters.
         """
         if not len(g):
             return None
         excess = np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0)
+        if not excess.max(initial=0.0) > 0.0:  # every row holds: the solve failed for another reason
+            return None
         j = int(np.argmax(excess))
-        what, when, scale, u_max = self.row_labels[j]
-        if u_max is None:
+        what, when, scale, u_max, group = self.row_labels[j]
+        if group is not None:  # a path constraint: a disc's depth, a separation deficit, … (direct method's units)
+            from .direct.violations import ConstraintRow, natural_violation
+
+            size, _ = natural_violation(ConstraintRow(what, when, "path", group), float(excess[j] * scale),
+                                        self.problem)  # fmt: skip
+        elif u_max is None:
             size = float(abs(g[j]) * scale)
-        else:  # the row is (|u|² − u_max²) / u_scale²
-            size = float(np.sqrt(max(u_max**2 + g[j] * u_scale**2, 0.0)) - u_max)
+        else:  # the row is |u|²/u_max² − 1
+            size = float(u_max * (np.sqrt(max(1.0 + g[j], 0.0)) - 1.0))
         return {"constraint": what, "time": float(when), "violation": size}
 
     def length_scale(self) -> float:
@@ -240,18 +297,38 @@ class FieldShooting:
         solver = self.solvers[key]
         self.interrupt.reset(None)  # iterations reported from 0 for each solve
         raise_if_interrupted()
-        sol = solver(x0=w, p=self.parameters(eps, cost_scale), lbg=self.lbg, ubg=self.ubg)
+        P = self.parameters(eps, cost_scale)
+        sol = solver(x0=self.variables(w, P), p=P, lbg=self.lbg, ubg=self.ubg)
         raise_if_interrupted()  # Ipopt stopped by the callback: the interrupt, not a result
         stats = solver.stats()
-        return np.asarray(sol["x"]).ravel(), {
+        return np.asarray(sol["x"]).ravel()[: self.nw], {
             "status": str(stats["return_status"]), "success": bool(stats["success"]),
             "iterations": int(stats["iter_count"]), "g": np.asarray(sol["g"]).ravel(),
+            "lam_g": np.asarray(sol["lam_g"]).ravel(),
         }  # fmt: skip
+
+    def variables(self, w: np.ndarray, P: np.ndarray) -> np.ndarray:
+        """The NLP's variables of the scaled controls ``w``: ``w`` itself, and the node states they fly when lifted."""
+        if not self.lifted:
+            return np.asarray(w, float)
+        return np.r_[np.asarray(w, float), np.asarray(self.lift(w, P)).ravel()]
+
+    def rows(self, w: np.ndarray, cost_scale: float) -> np.ndarray:
+        """The constraint rows (scaled, as Ipopt sees them) of the plan flown under the scaled controls ``w``.
+
+        Lifted, the NLP's node states of a failed solve need not be the ones its controls fly; these are.
+        """
+        P = self.parameters(1.0, cost_scale)
+        return np.asarray(self._rows(self.variables(w, P), P)).ravel()
+
+    def cost_terms(self, w: np.ndarray, P: np.ndarray) -> tuple[Any, Any, Any]:
+        """Tr[MΣ(tf)], the running cost and the control energy of the scaled controls ``w`` at parameters ``P``."""
+        return self._cost_terms(self.variables(w, P), P)
 
     def evaluate(self, w: np.ndarray, cost_scale: float = 1.0) -> ShootingTrajectory:
         """Trajectory and the cost split at ε = 1 of the scaled controls ``w``."""
         P = self.parameters(1.0, cost_scale)
-        Zs, pos, vel, U = (np.asarray(v) for v in self.trajectory(w, P))
+        Zs, pos, vel, U = (np.asarray(v) for v in self.trajectory(self.variables(w, P), P))
         n, N, K = self.n, self.N, self.K
         Z = Zs.reshape(n, n, K + 1, order="F").transpose(2, 0, 1)
         Sigma = self.L @ Z @ self.L.T

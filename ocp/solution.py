@@ -366,15 +366,10 @@ class Solution:
         """The shooting's own functions: u linear on each interval, p and v integrated exactly (eq. field.7)."""
         from scipy.interpolate import PchipInterpolator
 
+        from .field import flown_states
+
         t = self.t
-        k = np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 2)
-        h = (t[k + 1] - t[k])[:, None, None]
-        s = (times - t[k])[:, None, None]
-        tau = s / h
-        u0, du = self.u[k], self.u[k + 1] - self.u[k]
-        u = u0 + du * tau
-        v = self.v[k] + h * (u0 * tau + du * tau**2 / 2)
-        p = self.p[k] + s * self.v[k] + h**2 * (u0 * tau**2 / 2 + du * tau**3 / 6)
+        p, v, u = flown_states(t, self.p, self.v, self.u, times)
         n = self.problem.n
         if self.Sigma is None or np.ndim(self.Sigma) != 3:
             Sigma = np.full((len(times), n, n), np.nan)

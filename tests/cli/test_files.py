@@ -18,7 +18,7 @@ from mobisense.core.schema import file_schema
 #: the kind of every shipped example, told by its shape alone (none has a kind: key)
 SHIPPED_KINDS = {
     "hussein2008": "problem", "coupled_two_sensor": "problem", "terminal_and_bound": "problem",
-    "field_mapping_5x5": "problem", "field_mapping_10x10": "problem",
+    "field_mapping_5x5": "problem", "field_mapping_10x10": "problem", "field_mapping_island": "problem",
     "sweep_hussein2008": "sweep", "formation_cross": "formation", "formation_cross_equal_sides": "formation",
     "formation_cross_interior": "formation", "replay_hussein2008": "plan_replay",
     "replay_two_charges": "field_replay", "replay_isotherm13": "field_replay",

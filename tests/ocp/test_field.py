@@ -162,9 +162,92 @@ def test_schema_refuses_inconsistent_field_files():
     fixed["sensors"][0]["measures"] = [[1.0] + [0.0] * 8]
     with pytest.raises(ConfigError, match=r"sensors\[0\]\.measures: expected 'point' with method 'shooting'"):
         ms.Problem.from_dict(fixed)
-    zoned = {**field_problem(), "constraints": {"max_speed": 2.0}}  # was refused for "the indirect method's" reason
-    with pytest.raises(ConfigError, match=r"constraints: .* 'shooting': a field's shooting method keeps terminal"):
-        ms.Problem.from_dict(zoned)
+    zoned = {**field_problem(), "constraints": {"max_speed": 2.0}}  # the shooting method holds path constraints
+    assert ms.Problem.from_dict(zoned).solver.method == "shooting"
+    with pytest.raises(ConfigError, match=r"constraints: .* 'indirect': the indirect method has no state-constrained"):
+        ms.Problem.from_dict({**zoned, "solver": {"method": "indirect"}})
+
+
+def _zoned_field(method: str, intervals: int) -> dict:
+    """One sensor on the 2 × 2 field whose free path runs up the diagonal, past a disc and under a speed limit."""
+    data = field_problem(grid=(2, 2), sensors=1, method=method, collocation={"intervals": intervals},
+                         shooting={"intervals": intervals, "coarse_intervals": 10})  # fmt: skip
+    if method == "shooting":
+        del data["solver"]["collocation"]
+    else:
+        del data["solver"]["shooting"]
+    data["constraints"] = {"keep_out": [{"center": [1.7, 1.4], "radius": 0.5}], "max_speed": 0.6}
+    return data
+
+
+@pytest.mark.slow
+def test_path_constraints_on_a_field_match_the_direct_method_and_hold_between_the_nodes():
+    # independent computation: the same 4-state problem by direct collocation (which holds the constraints at its
+    # Radau nodes, by other code); the free path goes through the disc (diagonal from (0.5, 0.5) to (2.6, 2.6))
+    shot = ms.solve(ms.Problem.from_dict(_zoned_field("shooting", 80)))
+    direct = ms.solve(ms.Problem.from_dict(_zoned_field("direct", 80)))
+    assert shot.success and direct.success
+    free = ms.solve(ms.Problem.from_dict({**_zoned_field("shooting", 80), "constraints": None}))
+    assert shot.cost > free.cost * 1.02  # the constraints bind: 0.35498 against 0.34331
+    # measured 1.7e-8; each method's own change from K = 80 to 160: shooting 1e-8, direct 8.4e-7
+    assert shot.cost == pytest.approx(direct.cost, rel=2e-6)
+    report = shot.stats["constraints"]
+    assert report["keep_out[0]"]["active"] and report["max_speed"]["active"]
+    # on the flown path (exact between the nodes): within 1e-4 of the radius and of v_max (measured 3.4e-5, 1.2e-6)
+    assert report["keep_out[0]"]["max_violation"] < 1e-4 and report["max_speed"]["max_violation"] < 1e-4
+    from scipy.integrate import solve_ivp
+
+    t = shot.t_u  # the controls are linear between the nodes: integrate them independently and measure the margins
+    u = shot.u[:, 0]
+
+    def rhs(time: float, y: np.ndarray) -> np.ndarray:
+        return np.r_[y[2:], [np.interp(time, t, u[:, c]) for c in range(2)]]
+
+    fine = np.linspace(t[0], t[-1], 4001)
+    y = solve_ivp(rhs, (t[0], t[-1]), np.r_[0.5, 0.5, 0.0, 0.0], t_eval=fine, rtol=1e-11, atol=1e-12,
+                  max_step=(t[1] - t[0]) / 4).y  # fmt: skip
+    depth = 0.5 - np.hypot(y[0] - 1.7, y[1] - 1.4)
+    speed = np.hypot(y[2], y[3]) - 0.6
+    # the report's refined maxima bound the sampled ones of the independent integration (to its 1e-9 error)
+    assert depth.max() <= report["keep_out[0]"]["max_violation"] + 1e-9
+    assert speed.max() <= report["max_speed"]["max_violation"] + 1e-9
+    assert depth.max() > report["keep_out[0]"]["max_violation"] - 1e-5  # and are found: 4000 samples come close
+
+
+@pytest.mark.slow
+def test_a_field_plan_that_cannot_keep_its_constraints_reports_the_worst_one_in_its_units():
+    # a speed limit below what the terminal position needs (3 L in 5 T at v ≤ 0.3): Ipopt fails, the worst row is
+    # named in problem terms and sized as |v| − v_max (L/T), as the direct method does
+    data = field_problem(shooting={"intervals": 20, "coarse_intervals": 10})
+    data["sensors"][0]["terminal"] = {"p": [3.5, 3.5]}
+    data["constraints"] = {"max_speed": 0.3}
+    solution = ms.solve(ms.Problem.from_dict(data))
+    assert not solution.success
+    worst = solution.stats["worst_violation"]  # measured: max_speed at t = 1.75, 0.936 over v_max
+    assert worst["constraint"] == "max_speed of sensor g1" and worst["violation"] > 0.1
+    speed = np.linalg.norm(solution.sample(worst["time"]).v[0, 0])  # the node's speed, from the returned plan
+    assert worst["violation"] == pytest.approx(speed - 0.3, rel=1e-9)
+    assert "worst-violated constraint: max_speed of sensor g1" in solution.message
+
+
+@pytest.mark.slow
+def test_a_control_bound_that_does_not_bind_neither_fails_the_solve_nor_moves_the_optimum():
+    # first-hour audit: on a 3 × 3 field (largest |u| 0.37 unbounded) u_max = 0.5, 1 and 10 each ran Ipopt to its
+    # iteration limit (exit 1, J up to 4× the optimum and above the no-control baseline): the row was
+    # (|u|² − u_max²)/u_scale², far from 1 where u_max ≫ u_scale; now |u|²/u_max² − 1
+    base = field_problem(grid=(3, 3), sensors=2, shooting={"intervals": 40, "coarse_intervals": 10})
+    base["horizon"]["tf"] = 20.0
+    base["process"]["field"].update(extent=[[0, 10], [0, 10]], time_constant=20.0)
+    base["solver"]["tolerance"] = 1e-8
+    free = ms.solve(ms.Problem.from_dict(base))
+    assert free.success and np.linalg.norm(free.u, axis=2).max() < 0.4
+    for u_max in (0.5, 1.0, 10.0):
+        data = {**base, "sensors": [{**s, "u_max": u_max} for s in base["sensors"]]}
+        cold = ms.solve(ms.Problem.from_dict(data))
+        assert cold.success and cold.cost < cold.baseline["cost"] and "worst_violation" not in cold.stats
+        assert np.linalg.norm(cold.u, axis=2).max() <= u_max * (1 + 1e-8)
+        warm = ms.solve(ms.Problem.from_dict(data), init=free)  # from the unbounded optimum, where no bound binds
+        assert warm.success and warm.cost <= free.cost * (1 + 1e-9)  # measured −6e-12, −2.5e-3, −1e-12
 
 
 def test_terminal_position_and_control_bound_hold():
