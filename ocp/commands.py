@@ -127,7 +127,10 @@ def _solve(args: argparse.Namespace, figures: Any) -> int:
             raise ConfigError(f"{source}: {'/'.join(given)}: the shooting method runs its own ε schedule (0.03 … 1 on "
                               "a coarse grid, then ε = 1 on the fine one: docs/theory/field.md §3.4); leave "
                               f"{'them' if len(given) > 1 else 'it'} out")  # fmt: skip
-    problem = Problem.from_dict(data, source=source)  # ConfigError -> exit 2, nothing written
+    try:
+        problem = Problem.from_dict(data, source=source)  # ConfigError -> exit 2, nothing written
+    except ConfigError as err:
+        raise _named_flag(err, source, args) from None
     cluster = Cluster.from_args(args)
     if args.multistart is None and (cluster.scheduler or cluster.workers):
         raise ConfigError(f"{source}: --workers/--scheduler: only used with --multistart")
@@ -150,7 +153,10 @@ def _solve(args: argparse.Namespace, figures: Any) -> int:
         from ..core.extras import require_extra
 
         if problem.solver.method != "direct":
-            raise ConfigError(f"{source}: --multistart: expected solver.method 'direct', got {problem.solver.method!r}")
+            hint = "; a field's shooting draws random starts itself: solver.shooting.starts" if (
+                problem.solver.method == "shooting") else ""
+            raise ConfigError(f"{source}: --multistart: expected solver.method 'direct', got "
+                              f"{problem.solver.method!r}{hint}")  # fmt: skip
 
         require_extra("sweep", "mobisense solve --multistart")
     starts = args.multistart or 1
@@ -231,6 +237,28 @@ def _local_workers(requested: int | None) -> int:
     import os
 
     return requested or os.cpu_count() or 1
+
+
+#: the command-line flags that override keys of the file, and those keys
+FLAG_KEYS = {
+    "--intervals": ("solver.collocation.intervals", "solver.shooting.intervals", "solver.shooting.coarse_intervals"),
+    "--degree": ("solver.collocation.degree",),
+    "--step": ("solver.homotopy.step",),
+}
+
+
+def _named_flag(err: Exception, source: str, args: argparse.Namespace) -> Exception:
+    """``err`` about a key a flag set, reworded to name the flag (the file holds another value), else ``err``."""
+    from ..core.config import ConfigError
+
+    text = str(err)
+    for flag, keys in FLAG_KEYS.items():
+        value = getattr(args, flag[2:].replace("-", "_"), None)
+        for key in keys:
+            prefix = f"{source}: {key}:"
+            if value is not None and text.startswith(prefix):
+                return ConfigError(f"{source}: {flag} {value:g}: {text[len(prefix) :].strip()} (it sets {key})")
+    return err
 
 
 def _given_method(data: Any) -> str | None:

@@ -100,6 +100,10 @@ def solve_shooting(
     start = StartKind.WARM.value
     coarse_time = 0.0
     starts: list[dict[str, Any]] = []
+    init_unused = None
+    if init is not None and init.problem.N != problem.N:
+        init_unused = (f"init was not used: it has {init.problem.N} sensors, the problem {problem.N}; solved from the "
+                       "coarse ε-homotopy as without it")  # fmt: skip
     if init is not None and init.problem.N == problem.N:
         w = fine.controls_to_w(init.t_u, init.u, cost_scale)
     else:
@@ -130,6 +134,7 @@ def solve_shooting(
     full = o.full_sigma if o.full_sigma is not None else problem.n <= 25
     stats = {
         "start": start, "build_time_s": fine.build_time_s, "coarse_time_s": coarse_time,
+        **({"init_unused": init_unused} if init_unused else {}),
         **({"coarse_starts": starts} if starts else {}),
         "wall_time_s": time.perf_counter() - started, "nlp_variables": fine.nw, "intervals": fine.K,
         "substeps": fine.m, "coarse_intervals": o.coarse_intervals, "full_sigma": bool(full),

@@ -47,6 +47,7 @@ from ..core.units import LengthUnit, PhysicalUnit, TimeUnit, UnitSystem
 from .field import MAX_SUBSTEPS, FieldSpec, ShootingOptions, shooting_rate, shooting_substeps
 from .noise_models import NoiseModel, parse_noise
 from .path_constraints import PathConstraints, check_initial_state, check_terminal_states
+from .reachability import check_reachable
 from .solver_options import BVPOptions, CollocationOptions, HomotopyOptions, SolverOptions
 
 MAX_DIRECT_FIELD_STATES = 9  #: a larger field is refused by the methods that carry Σ as variables
@@ -290,6 +291,8 @@ class Problem(StrictModel):
                     "the indirect method's control law would be a non-smooth saturation; "
                     "remove u_max or use method 'direct'",
                 )
+            check_reachable(i, sensor, self.horizon.tf - self.horizon.t0,
+                            None if self.constraints is None else self.constraints.max_speed)  # fmt: skip
             if sensor.measures == "point":
                 self._check_point_sensor(i, sensor)
             elif sensor.measures is not None and method == "shooting":  # was silently measured as a point sensor

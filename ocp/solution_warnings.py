@@ -133,6 +133,8 @@ def strategy_warning(solution: Any) -> str | None:
 def init_warning(solution: Any) -> str | None:
     """Why the ``init`` a solve was given did not start it (another grid or structure, no converged point)."""
     start = solution.stats.get("start")
+    if solution.stats.get("init_unused"):  # a field's shooting says why itself
+        return str(solution.stats["init_unused"])
     if start == StartKind.INIT_OTHER_LAYOUT:
         return ("init was not used: its NLP has another structure or grid (sensors, states, scheme, degree or K); "
                 "solved from coasting (solver.strategy) as without it")  # fmt: skip

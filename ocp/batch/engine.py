@@ -25,7 +25,7 @@ from .chains import ChainLinks, best_seed, pair_chains, ring_order, solve_chain_
 from .cluster import CONNECT_TIMEOUT, insecure_warning
 from .worker import shareable_starts, solve_start_share, solve_task, task_problem
 
-__all__ = ["open_client", "run_tasks", "CHAIN_AHEAD"]
+__all__ = ["open_client", "run_tasks", "refuse_in_a_worker_import", "CHAIN_AHEAD"]
 
 #: links of one chain submitted ahead of their results (a link is up to LINK_TASKS tasks, see ChainLinks): one
 #: solving and one waiting on its worker. Chains that share an arc cannot take back a link in flight, so more links
@@ -77,6 +77,7 @@ def open_client(scheduler: str | None, workers: int | None, security: Any = None
             deferred.check()
             yield client
         return
+    refuse_in_a_worker_import()
     n = workers or os.cpu_count() or 1
     # the scheduler's HTTP server (no dashboard here) falls back to a free port when 8787 is taken: not news
     warnings.filterwarnings("ignore", message="Port .* is already in use", category=UserWarning)
@@ -87,14 +88,19 @@ def open_client(scheduler: str | None, workers: int | None, security: Any = None
         deferred_interrupts(raise_at_exit=False) as deferred,
         _sigint_blocked_in_new_processes(),
     ):
-        cluster = LocalCluster(
-            n_workers=n,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            silence_logs=50,
-            preload=["mobisense.ocp.batch.worker"],  # its dask_setup: workers ignore Ctrl-C (the client stops them)
-        )
+        try:
+            cluster = LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=50,
+                preload=["mobisense.ocp.batch.worker"],  # its dask_setup: workers ignore Ctrl-C (the client stops them)
+            )
+        except RuntimeError as exc:  # "Nanny failed to start": say what usually causes it
+            raise RuntimeError(f"{exc}: the local dask workers did not start (a script that calls ms.sweep or "
+                               "ms.multistart needs the call under `if __name__ == \"__main__\":`; the workers' own "
+                               "messages are above)") from exc  # fmt: skip
         try:
             client = Client(cluster)
         except BaseException:
@@ -103,6 +109,27 @@ def open_client(scheduler: str | None, workers: int | None, security: Any = None
     with cluster, client:
         deferred.check()  # Ctrl-C or SIGTERM during the start: stop now, closing the cluster cleanly
         yield client
+
+
+def refuse_in_a_worker_import() -> None:
+    """Raise ``RuntimeError`` when a local worker process, importing the user's script, reaches this call again.
+
+    Local workers are new Python processes that import the script that started them (multiprocessing's spawn): a
+    script calling ``ms.sweep`` at its top level, without ``if __name__ == "__main__":``, would start a cluster
+    in every worker, and the user saw "--out …: is in use by another mobisense run" and "Nanny failed to start"
+    (first-hour audit). A script run from stdin (``python - <<EOF``) cannot be imported by the workers at all.
+    """
+    import inspect
+
+    frame = inspect.currentframe()
+    while frame is not None and frame.f_globals.get("__name__") != "__mp_main__":  # the script, run by a worker
+        frame = frame.f_back
+    if frame is not None:
+        raise RuntimeError(
+            "mobisense: a local dask worker imported the script that calls ms.sweep/ms.multistart and reached that "
+            "call again: put the call under `if __name__ == \"__main__\":` (local workers import the script; a "
+            "script read from stdin cannot be imported, save it to a file)"
+        )
 
 
 @contextlib.contextmanager

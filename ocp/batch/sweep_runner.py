@@ -111,10 +111,12 @@ def run_sweep(
     from ...core.budget import check_budget
     from ...core.errors import ConfigError
     from ...core.output import OutputFolder
-    from .engine import open_client, run_tasks
+    from .engine import open_client, refuse_in_a_worker_import, run_tasks
     from .results_store import ResultStore, check_manifest, value_kind, write_manifest
     from .sweep import sweep_digest, sweep_estimates, task_count
 
+    if scheduler is None:
+        refuse_in_a_worker_import()  # before the folder's lock, which the parent process holds
     path, source = Path(path), str(path)
     spec, base = load_sweep(path)
     if time_limit is not None:

@@ -291,3 +291,18 @@ def test_a_mistyped_option_is_named_with_the_closest_ones_and_the_commands_help(
     assert "did you mean --strategy?" in stderr and "(see mobisense solve --help)" in stderr
     code, _, stderr = run_cli(["validate", "hussein2008", "--zzz"], capsys)  # nothing close: no guess
     assert code == 2 and "did you mean" not in stderr and "(see mobisense validate --help)" in stderr
+
+
+@pytest.mark.parametrize(("flags", "named"), [
+    (["--intervals", "0"], "--intervals 0: expected greater than or equal to 1 (got 0) (it sets "
+                           "solver.collocation.intervals)"),
+    (["--step", "0"], "--step 0: expected greater than or equal to 0.0001"),
+    (["--degree", "99"], "--degree 99: expected less than or equal to 9"),
+])  # fmt: skip
+def test_a_bad_override_names_its_flag_not_the_files_key(tmp_path, capsys, flags, named) -> None:
+    # first-hour audit: "--intervals 0" was reported as "hussein2008.yaml: solver.collocation.intervals: …",
+    # a key the file sets to 100
+    out = tmp_path / "out"
+    assert cli.main(["solve", "hussein2008", "--out", str(out), *flags]) == 2
+    err = capsys.readouterr().err
+    assert f"hussein2008.yaml: {named}" in err and err.count("\n") == 1 and not out.exists()

@@ -453,3 +453,21 @@ def test_a_damaged_results_fragment_is_named_with_its_reason_cut_at_a_word(tmp_p
         store.read()
     reason = str(err.value).split("not a readable results fragment (", 1)[1].split("); delete it", 1)[0]
     assert len(reason) <= 100 and (reason.endswith(" …") or "magic bytes not found" in reason)
+
+
+def test_a_sweep_reached_again_by_a_worker_importing_the_script_says_to_guard_it(tmp_path) -> None:
+    # first-hour audit: a script calling ms.sweep at its top level made every spawned worker call it again; the user
+    # saw "--out …: is in use by another mobisense run" and "Nanny failed to start". The worker's import runs the
+    # script as module "__mp_main__": simulated here by running the call with that module name
+    import mobisense as ms
+
+    script = "ms.sweep(path, out, workers=2)"
+    namespace = {"__name__": "__mp_main__", "ms": ms, "path": "sweep_hussein2008", "out": str(tmp_path / "out")}
+    with pytest.raises(RuntimeError, match=r'put the call under `if __name__ == "__main__":`'):
+        exec(compile(script, "user_script.py", "exec"), namespace)
+    assert not (tmp_path / "out").exists()  # refused before the output folder's lock
+    namespace["__name__"] = "__main__"  # the guarded parent process gets past the check (to the folder's checks)
+    from mobisense.ocp.batch.engine import refuse_in_a_worker_import
+
+    exec(compile("refuse_in_a_worker_import()", "user_script.py", "exec"),
+         {**namespace, "refuse_in_a_worker_import": refuse_in_a_worker_import})  # fmt: skip

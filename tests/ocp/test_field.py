@@ -12,12 +12,13 @@ import casadi as ca
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
-from short_runs import field_problem
+from short_runs import field_problem, field_solution
 
 import mobisense as ms
 from mobisense.core.config import ConfigError
 from mobisense.ocp.field import FieldSpec
 from mobisense.ocp.shooting import FieldShooting
+from mobisense.ocp.solution import StartKind
 
 
 def _spec(grid=(3, 3), kernel="matern32", length=3.0):
@@ -574,3 +575,12 @@ def test_random_coarse_starts_find_the_lower_optimum_the_homotopy_misses_on_a_sm
     assert [s["start"] for s in starts] == ["homotopy", "random start 1", "random start 2"]
     assert sum(s["kept"] for s in starts) >= 1 and not starts[0]["kept"]
     assert min(s["cost"] for s in starts) == pytest.approx(started.cost, rel=1e-3)  # coarse vs fine grid
+
+
+def test_an_init_of_other_sensors_is_not_used_and_says_so():
+    # first-hour audit: a field solve ignored an init it could not use without a word (the direct method warns)
+    one = field_solution()
+    problem = ms.Problem.from_dict(field_problem(sensors=2, shooting={"intervals": 20, "coarse_intervals": 10}))
+    with pytest.warns(UserWarning, match="init was not used: it has 1 sensors, the problem 2"):
+        two = ms.solve(problem, init=one)
+    assert two.success and two.stats["start"] == StartKind.COARSE.value

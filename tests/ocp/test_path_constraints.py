@@ -291,3 +291,31 @@ def test_a_plan_whose_flown_path_breaks_a_constraint_between_the_nodes_is_report
     # the shipped example's flown path keeps its constraints within 1e-4 of their sizes: no warning
     clear = solve_direct(Problem.from_dict(yaml.safe_load((PROBLEMS / "keep_out.yaml").read_text())))
     assert "warning" not in clear.summary()
+
+
+def _default_with(**sensor) -> dict:
+    data = yaml.safe_load((PROBLEMS / "hussein2008.yaml").read_text())
+    data["solver"]["collocation"]["intervals"] = 40
+    data["sensors"][0].update(sensor)
+    return data
+
+
+def test_a_terminal_state_out_of_reach_is_refused_naming_it_and_one_just_within_reach_is_solved() -> None:
+    # first-hour audit: p = (100, 100) with u_max = 0.5 in 10 T ran 6 starts for 17 s to "Infeasible_Problem_Detected
+    # … continuity of sensor s1 velocity y at t = 0.1"; necessary conditions now refuse it when the file is read
+    coast = np.array([10.0, 10.0]) + 10.0 * np.array([0.0, -2.0])  # p0 + v0 (tf − t0) of the default sensor
+    reach = 0.5 * 0.5 * 10.0**2  # u_max (tf − t0)² / 2 = 25
+    far = (coast + 1.01 * reach * np.array([0.6, 0.8])).tolist()
+    with pytest.raises(ConfigError, match=r"sensors\[0\]\.terminal\.p: expected a position reachable with \|u\|"):
+        Problem.from_dict(_default_with(terminal={"p": far}, u_max=0.5))
+    with pytest.raises(ConfigError, match=r"sensors\[0\]\.terminal\.v: expected a velocity reachable"):
+        Problem.from_dict(_default_with(terminal={"v": [0.0, 3.1]}, u_max=0.5))  # |Δv| = 5.1 > u_max T = 5
+    with pytest.raises(ConfigError, match=r"sensors\[0\]\.terminal\.p: expected a position reachable under "
+                                          r"constraints\.max_speed"):  # fmt: skip
+        Problem.from_dict({**_default_with(terminal={"p": [10.0, -21.0]}), "constraints": {"max_speed": 3.0}})
+    # 95 % of the reach: a constant push gets there (u = u_max toward it), so the NLP is feasible and solved
+    near = (coast + 0.95 * reach * np.array([0.6, 0.8])).tolist()
+    solution = solve_direct(Problem.from_dict(_default_with(terminal={"p": near}, u_max=0.5)))
+    assert solution.success, solution.message
+    assert np.allclose(solution.p[-1, 0], near, atol=1e-6)
+    assert np.linalg.norm(solution.u, axis=-1).max() <= 0.5 * (1 + 1e-6)
