@@ -136,8 +136,9 @@ def init_warning(solution: Any) -> str | None:
     if solution.stats.get("init_unused"):  # a field's shooting says why itself
         return str(solution.stats["init_unused"])
     if start == StartKind.INIT_OTHER_LAYOUT:
-        return ("init was not used: its NLP has another structure or grid (sensors, states, scheme, degree or K); "
-                "solved from coasting (solver.strategy) as without it")  # fmt: skip
+        return ("init was not used: its NLP has another structure (sensors, states, constraints, collocation scheme "
+                "or degree, or horizon; another number of intervals is moved onto the grid); solved from coasting "
+                "(solver.strategy) as without it")  # fmt: skip
     if start == StartKind.INIT_WITHOUT_POINT:
         return ("init was not used: it carries no converged ε = 1 NLP point (a failed solve, or one read from a "
                 "file); solved from coasting (solver.strategy) as without it")  # fmt: skip

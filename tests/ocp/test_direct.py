@@ -264,12 +264,13 @@ def test_an_init_that_does_not_fit_is_not_used_and_says_so() -> None:
     coarse = ms.solve(Problem.from_dict(hussein2008(collocation={"intervals": 30})))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        other_grid = ms.solve(Problem.from_dict(hussein2008(collocation={"intervals": 40})), init=coarse)
+        # another polynomial degree: other interval rows (another K alone is moved onto the grid: test_warm_shift)
+        other_grid = ms.solve(Problem.from_dict(hussein2008(collocation={"intervals": 30, "degree": 2})), init=coarse)
         same_grid = ms.solve(Problem.from_dict(hussein2008(collocation={"intervals": 30})), init=coarse)
     assert other_grid.stats["start"] == "init ignored: different structure or grid"
     assert same_grid.stats["start"] == "warm start from init"
     assert [str(w.message).split(":")[0] for w in caught] == ["init was not used"]  # one warning: other_grid's
     assert "init was not used" in other_grid.summary()["warning"]
     # not used means solved as without it: the same optimum as a solve without init
-    alone = ms.solve(Problem.from_dict(hussein2008(collocation={"intervals": 40})))
+    alone = ms.solve(Problem.from_dict(hussein2008(collocation={"intervals": 30, "degree": 2})))
     assert other_grid.cost == pytest.approx(alone.cost, rel=1e-12)

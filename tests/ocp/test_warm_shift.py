@@ -56,3 +56,21 @@ def test_a_point_shifted_onto_a_later_shorter_window_converges_in_a_few_iteratio
     # shifted point is close to it: measured 0 iterations against 21 cold; same optimum to Ipopt's tolerance
     assert sum(s.iterations for s in warm.homotopy) <= 5 < sum(s.iterations for s in cold.homotopy)
     assert abs(warm.cost - cold.cost) <= 1e-7 * cold.cost
+
+
+def test_an_init_on_another_number_of_intervals_is_moved_onto_the_grid() -> None:
+    # first-hour audit: refining the mesh (K = 100 → 150) with init= started from coasting (387 iterations); the
+    # optimum on the coarser grid now starts the finer one through the shifted point, and ends where a cold
+    # solve ends (the same local optimum: the discretisations differ by ~1e-7, the optima to solver tolerance)
+    data = yaml.safe_load((PROBLEMS / "coupled_two_sensor.yaml").read_text())
+    coarse = solve_direct(Problem.from_dict(data))
+    for K in (150, 30):
+        data["solver"]["collocation"]["intervals"] = K
+        problem = Problem.from_dict(data)
+        cold = solve_direct(problem)
+        warm = solve_direct(problem, init=coarse)
+        assert warm.stats["start"] == StartKind.WARM and warm.success
+        assert sum(step.iterations for step in warm.homotopy) <= 10  # measured 3 and 2; cold 294 and 251
+        assert warm.cost == pytest.approx(cold.cost, rel=1e-9)
+    data["solver"]["collocation"]["degree"] = 2  # another polynomial: the rows differ, nothing to move
+    assert solve_direct(Problem.from_dict(data), init=coarse).stats["start"] == StartKind.INIT_OTHER_LAYOUT
