@@ -45,6 +45,7 @@ __getattr__, __dir__, _names = _lazy_exports(
         "steady_state": "mobisense.estimation.cooperative.steady_state",
         "load_scenario": "mobisense.formation.scenarios",
         "SimulationResult": "mobisense.formation.simulation_result",
+        "open_dataset": "mobisense.core.netcdf",
     },
 )
 __all__ = ["__version__", *_names]
