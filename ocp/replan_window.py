@@ -255,7 +255,7 @@ class Replanner:
         relaxed: dict[str, float] = {}
         sub = window_problem(self.problem, t, t_end, p, v, Sigma, K, relaxed=relaxed)
         if self.shooting:
-            return self._solve_shooting(sub, previous, t, t_end, K)
+            return self._solve_shooting(sub, previous, t, t_end, K, relaxed)
         tr = self.transcription(sub)  # built before the flight by prepare(): not part of the re-solve time
         start = time.perf_counter()
         init: Any = None
@@ -272,7 +272,8 @@ class Replanner:
         self.records.append(ReplanRecord(t, t_end, K, iterations, elapsed, new.success, relaxed))
         return new
 
-    def _solve_shooting(self, sub: Problem, previous: Any, t: float, t_end: float, K: int) -> Any:
+    def _solve_shooting(self, sub: Problem, previous: Any, t: float, t_end: float, K: int,
+                        relaxed: dict[str, float]) -> Any:  # fmt: skip
         """A field's window solved by shooting (docs/theory/path_constraints.md §5.3).
 
         ``shifted`` starts the ε = 1 solve from the previous plan's controls at the same times (held at its last
@@ -289,5 +290,5 @@ class Replanner:
         new = solve_shooting(sub, init=init)
         elapsed = time.perf_counter() - start
         iterations = sum(step.iterations for step in new.homotopy)
-        self.records.append(ReplanRecord(t, t_end, K, iterations, elapsed, new.success))
+        self.records.append(ReplanRecord(t, t_end, K, iterations, elapsed, new.success, relaxed))
         return new

@@ -69,12 +69,15 @@ class FieldShooting:
     scaling : {"kinematic", "energy"}
         Unit of the NLP variables: u / (L/T²) (``kinematic``, as the direct method) or u·sqrt(αh/J₀)
         (``energy``: the control-energy Hessian ≈ I; faster for the small-ε homotopy steps).
+    control_bounds : bool
+        Hold the sensors' |u| ≤ u_max (the coarse homotopy does not: see :func:`mobisense.ocp.field_solve`).
     """
 
-    def __init__(self, problem: Problem, intervals: int, substeps: int | None = None,
-                 scaling: str = "kinematic", max_h_lambda: float = 0.25) -> None:  # fmt: skip
+    def __init__(self, problem: Problem, intervals: int, substeps: int | None = None, scaling: str = "kinematic",
+                 max_h_lambda: float = 0.25, control_bounds: bool = True) -> None:  # fmt: skip
         t_build = time.perf_counter()
         self.problem = problem
+        self.control_bounds = control_bounds
         self.field = problem.process.field.process()
         self.n, self.N, self.K = n, N, K = problem.n, problem.N, intervals
         mats = problem.matrices()
@@ -166,7 +169,7 @@ class FieldShooting:
                     ubg += [0.0, 0.0]
                     self.row_labels += [(f"terminal {key}[{c}] of sensor {s.name}", tf, scale, None, None)
                                         for c in range(2)]  # fmt: skip
-            if s.u_max is not None:
+            if s.u_max is not None and self.control_bounds:
                 for k in range(self.K + 1):
                     # relative to the bound: (|u|² − u_max²)/u_scale² was −(u_max/u_scale)² where u_max ≫ u_scale, and a
                     # bound that never binds (u_max = 1 for |u| ≤ 0.37) ran Ipopt to its iteration limit (first hour)

@@ -11,6 +11,8 @@ whose fill stays within each interval's block.
 
 from __future__ import annotations
 
+import numpy as np
+
 from ..core.budget import PROCESS_BYTES, Estimate
 from .direct.nlp_size import path_rows_size, transcription_size
 from .homotopy import fixed_schedule
@@ -100,6 +102,8 @@ def shooting_estimate(problem: Problem) -> Estimate:
     noise = [s.noise.parameters()[0] for s in problem.sensors]
     m = o.substeps or shooting_substeps(problem.process.field, noise, problem.horizon.tf - problem.horizon.t0,
                                         o.intervals)  # fmt: skip
+    if o.substeps is None and np.any(problem.cost.weight("K", n) != 0):
+        m = max(m, 4)  # as the solver takes it (FieldShooting): the running cost's quadrature needs 4 (audit: 4× low)
     what = (f"the shooting NLP (n = {n} field states, N = {problem.N} sensors, K = {o.intervals} intervals of m = {m} "
             "RK4 substeps)")  # fmt: skip
     if m == 1:  # one substep per interval: K itself sets K·m

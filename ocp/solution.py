@@ -263,9 +263,21 @@ class Solution:
 
     @property
     def improvement_percent(self) -> float | None:
-        """``100 (J_baseline − J) / J_baseline``; None without a baseline or when the baseline is infeasible."""
+        """``100 (J_baseline − J) / J_baseline``; None without a baseline, when it is infeasible or the solve failed.
+
+        J is the optimiser's, or the plan check's (the controls flown exactly) when the grid does not resolve the
+        plan (:data:`~mobisense.ocp.solution_warnings.PLAN_TOLERANCE`): a grid error of 0.17 % was quoted as an
+        improvement over coasting by a plan that coasts (random-problem audit).
+        """
+        from .solution_warnings import PLAN_TOLERANCE
+
         base = self.baseline.get("cost")
-        return None if not base or not self.baseline_feasible else 100.0 * (base - self.cost) / base
+        if not base or not self.baseline_feasible or not self.success:
+            return None
+        check = self.stats.get("plan_check") or {}
+        unresolved = check.get("cost") is not None and abs(check.get("relative_difference") or 0.0) > PLAN_TOLERANCE
+        cost = float(check["cost"]) if unresolved else self.cost
+        return 100.0 * (base - cost) / base
 
     def summary(self) -> dict[str, Any]:
         """The ``summary.json`` contract (see README)."""

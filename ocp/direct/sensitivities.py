@@ -55,6 +55,17 @@ def parameter_gradient(tr: Any, w: np.ndarray, lam_g: np.ndarray, P: np.ndarray)
     return tr.layout.unpack(grad)
 
 
+def _symmetric(G: np.ndarray) -> np.ndarray:
+    """(G + G')/2, the derivative of J by each entry of a symmetric matrix of the file.
+
+    The file can only change (i, j) and (j, i) together, so each is given half the derivative of that change.
+    Before, Σ0 gave it all to the upper entry (its lower one read 0.0), M and K halves and Q an uneven split
+    depending on B (random-problem audit).
+    """
+    G = np.atleast_2d(np.asarray(G, float))
+    return 0.5 * (G + G.T)
+
+
 def _matrix_leaves(prefix: str, G: np.ndarray) -> dict[str, float]:
     G = np.atleast_2d(G)
     return {f"{prefix}[{i}][{j}]": float(G[i, j]) for i in range(G.shape[0]) for j in range(G.shape[1])}
@@ -79,13 +90,16 @@ def leaf_sensitivities(problem: Problem, blocks: dict[str, np.ndarray]) -> dict[
     ``sensors[i].measures`` (when given as rows) moves ``C_i`` and the rows' locations (eq. path.8).
     """
     mats = problem.matrices()
-    B, Q = np.asarray(problem.process.B, float), np.asarray(problem.process.Q, float)
-    G = np.asarray(blocks["BQB"])
     out: dict[str, float] = {"horizon.t0": float(blocks["t0"][0]), "horizon.tf": float(blocks["tf"][0])}
-    out |= _matrix_leaves("process.A", blocks["A"])
-    out |= _matrix_leaves("process.B", (G + G.T) @ B @ Q)
-    out |= _matrix_leaves("process.Q", B.T @ G @ B)
-    out |= _matrix_leaves("process.Sigma0", blocks["Sigma0"])
+    field = problem.process.field is not None  # A, B, Q, the locations (and Σ0 unless given) derived from it
+    if not field:
+        B, Q = np.asarray(problem.process.B, float), np.asarray(problem.process.Q, float)
+        G = np.asarray(blocks["BQB"])
+        out |= _matrix_leaves("process.A", blocks["A"])
+        out |= _matrix_leaves("process.B", (G + G.T) @ B @ Q)
+        out |= _matrix_leaves("process.Q", _symmetric(B.T @ G @ B))
+    if problem.process.Sigma0 is not None:
+        out |= _matrix_leaves("process.Sigma0", _symmetric(blocks["Sigma0"]))
     d_loc = np.zeros_like(mats["locations"])
     for i, sensor in enumerate(problem.sensors):
         rows = np.abs(problem.measurement_rows(i))
@@ -102,10 +116,11 @@ def leaf_sensitivities(problem: Problem, blocks: dict[str, np.ndarray]) -> dict[
             out |= _vector_leaves(f"{key}.terminal.v", blocks[f"vT_{i}"])
         if f"umax_{i}" in blocks:
             out[f"{key}.u_max"] = float(blocks[f"umax_{i}"][0])
-    out |= _matrix_leaves("process.locations", d_loc)
-    out |= _matrix_leaves("cost.M", blocks["M"])
-    if problem.cost.K is not None:
-        out |= _matrix_leaves("cost.K", blocks["K"])
+    if not field:
+        out |= _matrix_leaves("process.locations", d_loc)
+    for key in ("M", "K"):  # a named weight (mean, sum, zero) has no numbers in the file
+        if isinstance(getattr(problem.cost, key), list):
+            out |= _matrix_leaves(f"cost.{key}", _symmetric(blocks[key]))
     out["cost.alpha"] = float(blocks["alpha"][0])
     out |= _constraint_leaves(problem, blocks)
     return out

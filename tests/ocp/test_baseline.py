@@ -41,3 +41,24 @@ def test_no_improvement_is_quoted_over_an_infeasible_baseline(tmp_path, capsys):
     ]
     out = capsys.readouterr().out
     assert "none quoted: the baseline is infeasible" in out and "%" not in out.split("improvement")[1].split("\n")[0]
+
+
+def test_the_improvement_is_quoted_from_the_flown_plan_when_the_grid_does_not_resolve_it() -> None:
+    # random-problem audit: a plan that coasts (|u| ≤ 7e-5) was quoted 0.167 % better than coasting from the NLP's J,
+    # a grid error (its re-integrated J equals the baseline to 1.6e-10); a failed solve quoted one too
+    import copy
+
+    import mobisense as ms
+
+    solution = ms.solve(ms.Problem.from_dict(hussein2008(collocation={"intervals": 30})))
+    base, check = solution.baseline["cost"], solution.stats["plan_check"]
+    assert solution.improvement_percent == pytest.approx(100 * (base - solution.cost) / base, rel=1e-12)
+    unresolved = copy.copy(solution)
+    unresolved.stats = {**solution.stats, "plan_check": {**check, "cost": base, "relative_difference": -2e-3}}
+    assert unresolved.improvement_percent == 0.0  # the flown plan's J: no better than coasting
+    resolved = copy.copy(solution)  # within the plan tolerance (1e-5) the optimiser's J is quoted
+    resolved.stats = {**solution.stats, "plan_check": {**check, "cost": base, "relative_difference": 5e-6}}
+    assert resolved.improvement_percent == solution.improvement_percent
+    failed = copy.copy(solution)
+    failed.status = ms.SolveStatus.FAILED
+    assert failed.improvement_percent is None

@@ -98,3 +98,35 @@ def test_sensitivities_need_the_direct_method(tmp_path, capsys) -> None:
     code = cli.main(["solve", str(PROBLEMS / "hussein2008.yaml"), "--method", "indirect", "--out", str(out),
                      "--sensitivities"])  # fmt: skip
     assert code == 2 and "--sensitivities" in capsys.readouterr().err and not out.exists()
+
+
+@pytest.mark.slow
+def test_a_symmetric_matrix_gives_each_of_its_two_off_diagonal_entries_half_the_derivative() -> None:
+    # random-problem audit: Σ0[0][1] read −0.0648 with Σ0[1][0] 0.0, M and K halves, Q an uneven split depending on
+    # B; only the pair's sum matched a central difference. Each entry is now half the derivative of changing both
+    problem = _problem("coupled_two_sensor.yaml")
+    solution = solve_direct(problem)
+    sens = solution_sensitivities(transcription_for(problem), solution)
+    base = problem.normalised()
+    for key in ("process.Sigma0", "process.Q", "cost.M"):
+        upper, lower = sens[f"{key}[0][1]"], sens[f"{key}[1][0]"]
+        assert upper == lower
+        x = _get(base, f"{key}[0][1]")
+        h = 1e-4 * (abs(x) or 1.0)
+        costs = []
+        for s in (1, -1):
+            both = _with(_with(base, f"{key}[0][1]", x + s * h), f"{key}[1][0]", x + s * h)
+            costs.append(solve_direct(Problem.from_dict(both), init=solution).cost)
+        # the symmetric change moves both entries: dJ = (upper + lower) h; central difference as in the test above
+        assert upper + lower == pytest.approx((costs[0] - costs[1]) / (2 * h), rel=1e-5, abs=1e-9), key
+
+
+def test_a_field_solved_directly_lists_no_derived_matrices_and_no_named_weights() -> None:
+    # A, B, Q, Σ0 and the locations of a field are derived from it; M: mean names no numbers (they were listed)
+    from short_runs import field_problem
+
+    problem = Problem.from_dict(field_problem(method="direct", collocation={"intervals": 10}))
+    solution = solve_direct(problem)
+    sens = solution_sensitivities(transcription_for(problem), solution)
+    assert not [key for key in sens if key.startswith(("process.", "cost.M", "cost.K"))]
+    assert {"cost.alpha", "horizon.tf", "sensors[0].p0[0]", "sensors[0].noise.variance_value"} <= set(sens)
