@@ -134,7 +134,9 @@ def solve_shooting(
     record(1.0, result.costs[0] + result.costs[1], info, t0)
     status = SolveStatus.SOLVED if info["success"] else SolveStatus.FAILED
     solved_eps = [step.eps for step in steps if step.success]
-    eps = 1.0 if info["success"] else max(solved_eps, default=0.0)  # the fine ε = 1 solve failed: what was solved
+    # the fine ε = 1 solve failed: the largest ε solved, below 1 (the coarse ε = 1 step solved a relaxed problem:
+    # another grid, without |u| ≤ u_max)
+    eps = 1.0 if info["success"] else max([e for e in solved_eps if e < 1.0], default=0.0)
     full = o.full_sigma if o.full_sigma is not None else problem.n <= 25
     stats = {
         "start": start, "build_time_s": fine.build_time_s, "coarse_time_s": coarse_time,
