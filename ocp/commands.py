@@ -88,7 +88,15 @@ class SolveCommand:
             "random feasible trajectories solved at ε = 1) on dask workers and keep the best",
         )
         add_cluster_arguments(parser, "--multistart")
-        add_budget_argument(parser, "solver.time_limit in the problem file")
+        parser.add_argument(
+            "--time-limit",
+            type=float,
+            default=None,
+            metavar="S",
+            help="wall-clock limit of each Ipopt solve (sets solver.time_limit; a solve it stops exits 1 and keeps "
+            "what was solved)",
+        )
+        add_budget_argument(parser, "--time-limit (solver.time_limit in the problem file)")
 
     @staticmethod
     def run(args: argparse.Namespace) -> int:
@@ -244,6 +252,7 @@ FLAG_KEYS = {
     "--intervals": ("solver.collocation.intervals", "solver.shooting.intervals", "solver.shooting.coarse_intervals"),
     "--degree": ("solver.collocation.degree",),
     "--step": ("solver.homotopy.step",),
+    "--time-limit": ("solver.time_limit",),
 }
 
 
@@ -279,6 +288,8 @@ def apply_overrides(data: dict[str, Any], args: argparse.Namespace) -> dict[str,
         return data
     if args.method is not None:
         solver["method"] = args.method
+    if getattr(args, "time_limit", None) is not None:
+        solver["time_limit"] = args.time_limit
     if args.strategy is not None:
         solver["strategy"] = args.strategy
     collocation = {

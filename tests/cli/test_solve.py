@@ -298,6 +298,7 @@ def test_a_mistyped_option_is_named_with_the_closest_ones_and_the_commands_help(
                            "solver.collocation.intervals)"),
     (["--step", "0"], "--step 0: expected greater than or equal to 0.0001"),
     (["--degree", "99"], "--degree 99: expected less than or equal to 9"),
+    (["--time-limit", "-1"], "--time-limit -1: expected greater than 0 (got -1.0) (it sets solver.time_limit)"),
 ])  # fmt: skip
 def test_a_bad_override_names_its_flag_not_the_files_key(tmp_path, capsys, flags, named) -> None:
     # first-hour audit: "--intervals 0" was reported as "hussein2008.yaml: solver.collocation.intervals: …",
@@ -306,3 +307,14 @@ def test_a_bad_override_names_its_flag_not_the_files_key(tmp_path, capsys, flags
     assert cli.main(["solve", "hussein2008", "--out", str(out), *flags]) == 2
     err = capsys.readouterr().err
     assert f"hussein2008.yaml: {named}" in err and err.count("\n") == 1 and not out.exists()
+
+
+def test_time_limit_stops_each_ipopt_solve_and_keeps_what_was_solved(tmp_path, capsys) -> None:
+    # first-hour audit: solve had no --time-limit (only sweep); it sets solver.time_limit like the file's key
+    out = tmp_path / "out"
+    assert cli.main(["solve", "field_mapping_5x5", "--time-limit", "0.3", "--out", str(out), "--no-plot",
+                     "--quiet"]) == 1  # fmt: skip
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "failed" and "Maximum_WallTime_Exceeded" in summary["message"]
+    assert summary["solver"]["time_limit"] == 0.3 and (out / "solution.nc").exists()
+
