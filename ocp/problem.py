@@ -238,7 +238,7 @@ class Problem(StrictModel):
     )
     cost: Cost = Field(description="weights of J = Tr[M Σ(tf)] + ∫ (α/2 |u|² + Tr[K Σ]) dt")
     constraints: PathConstraints | None = Field(
-        None, description="path constraints of the sensors (direct and shooting methods; docs/theory/path_constraints.md)"
+        None, description="path constraints of the sensors (direct and shooting methods; path_constraints.md)"
     )
     solver: SolverOptions = Field(SolverOptions(), description="how to solve (method, grid, homotopy, tolerances)")
 
