@@ -29,6 +29,9 @@ from ..core.config import MAX_MAGNITUDE, MIN_MAGNITUDE, InvalidValue, PositiveFl
 __all__ = [
     "ShootingOptions",
     "flown_states",
+    "RUNNING_COST_SUBSTEPS",
+    "substeps_for",
+    "FULL_SIGMA_STATES",
     "MAX_FIELD_STATES",
     "MAX_SUBSTEPS",
     "FieldKernel",
@@ -73,6 +76,26 @@ def shooting_substeps(spec: FieldSpec, noise_variances: list[float], duration: f
     return max(1, math.ceil(h * shooting_rate(spec, noise_variances) / max_h_lambda - 1e-9))
 
 
+#: substeps per interval at least with a running weight K ≠ 0: the endpoint quadrature of ∫Tr KΣ then has a
+#: relative error below 1e-6
+RUNNING_COST_SUBSTEPS = 4
+
+
+def substeps_for(problem: Any, intervals: int, max_h_lambda: float = 0.25) -> int:
+    """Substeps a shooting solve of ``problem`` (a :class:`~mobisense.ocp.problem.Problem`) takes on ``intervals``.
+
+    :func:`shooting_substeps` of its field and sensors, at least :data:`RUNNING_COST_SUBSTEPS` with a running
+    weight K ≠ 0 (told by its name or its numbers: no n × n matrix is built for a name). The solver
+    (:class:`~mobisense.ocp.shooting.FieldShooting`) and its time estimate (:mod:`mobisense.ocp.sizes`) both
+    take it from here; the estimate had counted 1 where the solver took 4 (random-problem audit).
+    """
+    m = shooting_substeps(problem.process.field, [s.noise.parameters()[0] for s in problem.sensors],
+                          problem.horizon.tf - problem.horizon.t0, intervals, max_h_lambda)  # fmt: skip
+    K = problem.cost.K
+    running = K in ("mean", "sum") or (isinstance(K, list) and bool(np.any(np.asarray(K) != 0)))
+    return max(m, RUNNING_COST_SUBSTEPS) if running else m
+
+
 #: memory per shooting interval beyond its matrices (the expression graph's nodes and Ipopt's per-variable
 #: vectors): the 5 × 5 field with N = 4 on K = 10 000 intervals (m = 1) peaked at 1.27 GB against 763 MiB estimated
 #: without it (field audit, one measurement), 51 kB an interval
@@ -105,6 +128,8 @@ FLOPS_PER_SECOND = 2e9
 SECONDS_PER_SENSOR_PAIR = 2e-6
 #: h·λ_max of the coarse phase's substeps (the ε-homotopy and random starts: a guide for the fine solve, not J)
 COARSE_H_LAMBDA = 2.0
+#: output files hold the full Σ(t) up to this many states by default, the variances diag Σ(t) beyond
+FULL_SIGMA_STATES = 25
 #: least Ipopt iterations of the fine solve, of a coarse ε step and of a random coarse start (measured on the 5 × 5,
 #: 7 × 4 and 10 × 10 fields: 25–31, 21–49 and 42–107)
 FINE_ITERATIONS, STEP_ITERATIONS, START_ITERATIONS = 20, 20, 40
@@ -225,7 +250,9 @@ class ShootingOptions(StrictModel):
                                   description="coarse ε schedule")  # fmt: skip
     homotopy_tolerance: float = Field(1e-5, gt=0.0, lt=1.0, description="Ipopt tol of the coarse steps")
     coarse_max_iterations: int = Field(300, ge=1, le=1_000_000, description="Ipopt iterations per coarse step")
-    full_sigma: bool | None = Field(None, description="write the full Σ(t) to solution.nc (default: n <= 25)")
+    full_sigma: bool | None = Field(
+        None, description=f"write the full Σ(t) to solution.nc (default: n <= {FULL_SIGMA_STATES})"
+    )
     starts: int = Field(0, ge=0, le=100, description="random coarse ε = 1 starts beside the ε-homotopy; the lowest "
                         "coarse J starts the fine solve (docs/theory/field.md §3.4)")  # fmt: skip
 

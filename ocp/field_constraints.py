@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from .direct.path_report import ACTIVE_MULTIPLIER, ACTIVE_TOLERANCE, refine_maximum
+from .direct.path_report import refine_maximum, rows_active
 from .field import flown_states
 from .path_constraints import (
     PathConstraints,
@@ -116,8 +116,7 @@ def shooting_constraint_report(problem: Problem, trajectory: Any, rows: np.ndarr
         largest, when = refine_maximum(lambda times, name=name: margins(constraints, *flown(times), only=name)[name],
                                        t, violation[name])  # fmt: skip
         out[name] = {
-            "active": bool(rows[:, mask].max() >= -ACTIVE_TOLERANCE
-                           or np.abs(multipliers[:, mask]).max() >= ACTIVE_MULTIPLIER),  # fmt: skip
+            "active": rows_active(rows[:, mask], multipliers[:, mask]),
             "max_violation": largest,
             "max_violation_time": when,
             "max_violation_at_nodes": float(at_nodes[name].max()),

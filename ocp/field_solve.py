@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from ..core.config import ConfigError
-from .field import COARSE_H_LAMBDA
+from .field import COARSE_H_LAMBDA, FULL_SIGMA_STATES
 from .field_constraints import shooting_constraint_report
 from .problem import Problem
 from .shooting import FieldShooting
@@ -100,11 +100,12 @@ def solve_shooting(
     start = StartKind.WARM.value
     coarse_time = 0.0
     starts: list[dict[str, Any]] = []
+    usable = init is not None and init.problem.N == problem.N
     init_unused = None
-    if init is not None and init.problem.N != problem.N:
+    if init is not None and not usable:
         init_unused = (f"init was not used: it has {init.problem.N} sensors, the problem {problem.N}; solved from the "
                        "coarse ε-homotopy as without it")  # fmt: skip
-    if init is not None and init.problem.N == problem.N:
+    if usable:
         w = fine.controls_to_w(init.t_u, init.u, cost_scale)
     else:
         start = StartKind.COARSE.value
@@ -137,7 +138,7 @@ def solve_shooting(
     # the fine ε = 1 solve failed: the largest ε solved, below 1 (the coarse ε = 1 step solved a relaxed problem:
     # another grid, without |u| ≤ u_max)
     eps = 1.0 if info["success"] else max([e for e in solved_eps if e < 1.0], default=0.0)
-    full = o.full_sigma if o.full_sigma is not None else problem.n <= 25
+    full = o.full_sigma if o.full_sigma is not None else problem.n <= FULL_SIGMA_STATES
     stats = {
         "start": start, "build_time_s": fine.build_time_s, "coarse_time_s": coarse_time,
         **({"init_unused": init_unused} if init_unused else {}),

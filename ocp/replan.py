@@ -269,14 +269,7 @@ def replan_monte_carlo(
     replanner = Replanner(problem, length, warm_start)  # type: ignore[arg-type]
     h = problem.horizon
     build_time = replanner.prepare(np.arange(h.t0 + every, h.tf - 2 * time_step, every))
-    if replanner.shooting:
-        from .field_solve import solve_shooting
-
-        full = solve_shooting(problem)
-    else:
-        from .direct.solver import solve_direct
-
-        full = solve_direct(problem)
+    full = replanner.solved(problem)
     plan = full if replanner.window(h.t0)[0] >= h.tf else replanner.first_plan()
     for what, solution in (("the full-horizon plan", full), ("the first window's plan", plan)):
         if not solution.success:

@@ -232,63 +232,61 @@ class Replanner:
         p, v = (np.array([getattr(s, key) for s in sensors], float) for key in ("p0", "v0"))
         return p, v, self.problem.matrices()["Sigma0"]
 
-    def first_plan(self) -> Any:
-        """The plan over the first window (the problem's solve strategy)."""
-        from .direct.solver import solve_direct
-
-        t0 = self.problem.horizon.t0
-        t_end, K = self.window(t0)
-        sub = window_problem(self.problem, t0, t_end, *self._initial_state(), K, strategy=None)
+    def solved(self, sub: Problem, init: Any = None, transcription: Any = None) -> Any:
+        """``sub`` solved by the problem's method: a field by shooting, else directly on its kept transcription."""
         if self.shooting:
             from .field_solve import solve_shooting
 
-            return solve_shooting(sub)
-        return solve_direct(sub, transcription=self.transcription(sub))
+            return solve_shooting(sub, init=init)
+        from .direct.solver import solve_direct
+
+        return solve_direct(sub, transcription=transcription or self.transcription(sub), init=init)
+
+    def first_plan(self) -> Any:
+        """The plan over the first window (the problem's solve strategy)."""
+        t0 = self.problem.horizon.t0
+        t_end, K = self.window(t0)
+        return self.solved(window_problem(self.problem, t0, t_end, *self._initial_state(), K, strategy=None))
 
     def solve(self, previous: Any, t: float, p: np.ndarray, v: np.ndarray, Sigma: np.ndarray) -> Any:
         """The plan re-solved at ``t`` from ``p``, ``v``, Σ, started from ``previous`` (None: cold)."""
-        from .direct.solver import solve_direct
-        from .direct.warm_shift import shifted_point
-        from .model import Structure
-
         t_end, K = self.window(t)
         relaxed: dict[str, float] = {}
         sub = window_problem(self.problem, t, t_end, p, v, Sigma, K, relaxed=relaxed)
-        if self.shooting:
-            return self._solve_shooting(sub, previous, t, t_end, K, relaxed)
-        tr = self.transcription(sub)  # built before the flight by prepare(): not part of the re-solve time
+        # built before the flight by prepare(), not part of the re-solve time; a shooting graph holds its window's
+        # Σ0 as a constant: built with each re-solve, and timed with it
+        tr = None if self.shooting else self.transcription(sub)
         start = time.perf_counter()
-        init: Any = None
-        if previous is not None and Structure.of(previous.problem) != Structure.of(sub):
-            previous = None  # a relaxation dropped a zone: the previous point has other rows (cold start)
-        if previous is not None and self.warm_start == "shifted":
-            P_new = tr.layout.pack(tr.layout.values(sub))  # cost_scale 1: solve_direct re-scales the point
-            init = shifted_point(previous, self.transcription(previous.problem), tr, P_new, (t, t_end))
-        elif previous is not None and self.warm_start == "reused":
-            init = previous
-        new = solve_direct(sub, transcription=tr, init=init)
+        init = self._shooting_start(previous, t, t_end) if tr is None else self._direct_start(previous, sub, tr, t,
+                                                                                                t_end)  # fmt: skip
+        new = self.solved(sub, init, tr)
         elapsed = time.perf_counter() - start
         iterations = sum(step.iterations for step in new.homotopy)
         self.records.append(ReplanRecord(t, t_end, K, iterations, elapsed, new.success, relaxed))
         return new
 
-    def _solve_shooting(self, sub: Problem, previous: Any, t: float, t_end: float, K: int,
-                        relaxed: dict[str, float]) -> Any:  # fmt: skip
-        """A field's window solved by shooting (docs/theory/path_constraints.md §5.3).
+    def _direct_start(self, previous: Any, sub: Problem, tr: Any, t: float, t_end: float) -> Any:
+        """The ``init`` of a direct window (:mod:`mobisense.ocp.direct.warm_shift` for ``shifted``)."""
+        from .direct.warm_shift import shifted_point
+        from .model import Structure
+
+        if previous is None or self.warm_start == "cold" or Structure.of(previous.problem) != Structure.of(sub):
+            return None  # a relaxation dropped a zone: the previous point has other rows (cold start)
+        if self.warm_start == "reused":
+            return previous
+        P_new = tr.layout.pack(tr.layout.values(sub))  # cost_scale 1: solve_direct re-scales the point
+        return shifted_point(previous, self.transcription(previous.problem), tr, P_new, (t, t_end))
+
+    def _shooting_start(self, previous: Any, t: float, t_end: float) -> Any:
+        """The ``init`` of a field's window (docs/theory/path_constraints.md §5.3).
 
         ``shifted`` starts the ε = 1 solve from the previous plan's controls at the same times (held at its last
         node past its end), ``reused`` from them node by node, ``cold`` runs the coarse ε-homotopy.
         """
         from dataclasses import replace
 
-        from .field_solve import solve_shooting
-
-        start = time.perf_counter()
-        init = None if self.warm_start == "cold" else previous
-        if init is not None and self.warm_start == "reused":  # its k-th node's control at the window's k-th node
-            init = replace(init, t_u=np.linspace(t, t_end, len(init.t_u)))
-        new = solve_shooting(sub, init=init)
-        elapsed = time.perf_counter() - start
-        iterations = sum(step.iterations for step in new.homotopy)
-        self.records.append(ReplanRecord(t, t_end, K, iterations, elapsed, new.success, relaxed))
-        return new
+        if previous is None or self.warm_start == "cold":
+            return None
+        if self.warm_start == "reused":  # its k-th node's control at the window's k-th node
+            return replace(previous, t_u=np.linspace(t, t_end, len(previous.t_u)))
+        return previous

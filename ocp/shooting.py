@@ -25,21 +25,15 @@ import numpy as np
 
 from ..core.interrupts import raise_if_interrupted
 from .direct.iteration_limit import IterationLimit
-from .field import shooting_substeps
+from .field import substeps_for
 from .field_constraints import path_row_function
 from .mobius import mobius_rk4_step
 from .problem import Problem
 
-__all__ = ["FAR", "ShootingTrajectory", "FieldShooting", "substeps_for"]
+__all__ = ["FAR", "ShootingTrajectory", "FieldShooting"]
 
 #: a sensor's distance from the field counts in the kinematic unit up to this many times the field's diagonal
 FAR = 10.0
-
-
-def substeps_for(problem: Problem, intervals: int, max_h_lambda: float = 0.25) -> int:
-    """Substeps of :func:`~mobisense.ocp.field.shooting_substeps` for ``problem`` on ``intervals``."""
-    return shooting_substeps(problem.process.field, [s.noise.parameters()[0] for s in problem.sensors],
-                             problem.horizon.tf - problem.horizon.t0, intervals, max_h_lambda)  # fmt: skip
 
 
 @dataclass
@@ -64,8 +58,7 @@ class FieldShooting:
     intervals : int
         K.
     substeps : int, optional
-        m; default :func:`substeps_for` (at least 4 with a running weight K ≠ 0: the endpoint quadrature of
-        ∫Tr KΣ then has a relative error below 1e-6).
+        m; default :func:`~mobisense.ocp.field.substeps_for` (at least 4 with a running weight K ≠ 0).
     scaling : {"kinematic", "energy"}
         Unit of the NLP variables: u / (L/T²) (``kinematic``, as the direct method) or u·sqrt(αh/J₀)
         (``energy``: the control-energy Hessian ≈ I; faster for the small-ε homotopy steps).
@@ -84,8 +77,6 @@ class FieldShooting:
         self.M, self.Kw = mats["M"], mats["K"]
         self.running_state_cost = bool(np.any(self.Kw != 0))
         self.m = substeps or substeps_for(problem, K, max_h_lambda)
-        if substeps is None and self.running_state_cost:
-            self.m = max(self.m, 4)
         self.scaling = scaling
         self.L = self.field.chol
         self.Linv = np.linalg.solve(self.L, np.eye(n))

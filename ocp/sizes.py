@@ -11,8 +11,6 @@ whose fill stays within each interval's block.
 
 from __future__ import annotations
 
-import numpy as np
-
 from ..core.budget import PROCESS_BYTES, Estimate
 from .direct.nlp_size import path_rows_size, transcription_size
 from .homotopy import fixed_schedule
@@ -95,16 +93,11 @@ def shooting_estimate(problem: Problem) -> Estimate:
         STEP_ITERATIONS,
         shooting_memory_bytes,
         shooting_seconds,
-        shooting_substeps,
+        substeps_for,
     )
 
     o, n = problem.solver.shooting, problem.n
-    noise = [s.noise.parameters()[0] for s in problem.sensors]
-    m = o.substeps or shooting_substeps(problem.process.field, noise, problem.horizon.tf - problem.horizon.t0,
-                                        o.intervals)  # fmt: skip
-    K = problem.cost.K  # a name (mean, sum, zero) or the file's matrix: no n × n array built for a name
-    if o.substeps is None and (K in ("mean", "sum") or (isinstance(K, list) and np.any(np.asarray(K) != 0))):
-        m = max(m, 4)  # as the solver takes it (FieldShooting): the running cost's quadrature needs 4 (audit: 4× low)
+    m = o.substeps or substeps_for(problem, o.intervals)  # as the solver takes them (FieldShooting)
     what = (f"the shooting NLP (n = {n} field states, N = {problem.N} sensors, K = {o.intervals} intervals of m = {m} "
             "RK4 substeps)")  # fmt: skip
     if m == 1:  # one substep per interval: K itself sets K·m
@@ -117,8 +110,7 @@ def shooting_estimate(problem: Problem) -> Estimate:
         )
     N = problem.N
     # the coarse phase first: each ε step of the schedule and each random start, on the coarse grid
-    m_coarse = shooting_substeps(problem.process.field, noise, problem.horizon.tf - problem.horizon.t0,
-                                 o.coarse_intervals, COARSE_H_LAMBDA)  # fmt: skip
+    m_coarse = substeps_for(problem, o.coarse_intervals, COARSE_H_LAMBDA)
     coarse_iterations = STEP_ITERATIONS * len(o.homotopy) + START_ITERATIONS * o.starts
     seconds = shooting_seconds(n, o.intervals, m, N) + shooting_seconds(n, o.coarse_intervals, m_coarse, N,
                                                                          coarse_iterations)  # fmt: skip

@@ -269,15 +269,13 @@ class Solution:
         plan (:data:`~mobisense.ocp.solution_warnings.PLAN_TOLERANCE`): a grid error of 0.17 % was quoted as an
         improvement over coasting by a plan that coasts (random-problem audit).
         """
-        from .solution_warnings import PLAN_TOLERANCE
+        from .solution_warnings import unresolved_plan_cost
 
         base = self.baseline.get("cost")
         if not base or not self.baseline_feasible or not self.success:
             return None
-        check = self.stats.get("plan_check") or {}
-        unresolved = check.get("cost") is not None and abs(check.get("relative_difference") or 0.0) > PLAN_TOLERANCE
-        cost = float(check["cost"]) if unresolved else self.cost
-        return 100.0 * (base - cost) / base
+        flown = unresolved_plan_cost(self)
+        return 100.0 * (base - (self.cost if flown is None else flown)) / base
 
     def summary(self) -> dict[str, Any]:
         """The ``summary.json`` contract (see README)."""

@@ -10,8 +10,8 @@ from typing import Any
 
 from .solve_outcome import StartKind
 
-__all__ = ["PLAN_TOLERANCE", "PATH_TOLERANCE", "solution_warnings", "plan_warning", "constraint_warning",
-           "strategy_warning", "init_warning"]  # fmt: skip
+__all__ = ["PLAN_TOLERANCE", "PATH_TOLERANCE", "solution_warnings", "unresolved_plan_cost", "plan_warning",
+           "constraint_warning", "strategy_warning", "init_warning"]  # fmt: skip
 
 #: relative difference of the optimiser's J from its plan re-integrated (``stats["plan_check"]``) above which the
 #: grid is reported as not resolving the plan (the discretisation error of a resolved grid is far smaller:
@@ -86,6 +86,18 @@ def _intervals(solution: Any) -> Any:
     return solution.collocation[2] if solution.collocation is not None else solution.stats.get("intervals")
 
 
+def unresolved_plan_cost(solution: Any) -> float | None:
+    """J of the plan re-integrated when it differs from the optimiser's by more than :data:`PLAN_TOLERANCE`, else None.
+
+    The grid does not resolve such a plan (:func:`plan_warning`); its quoted improvement uses this J.
+    """
+    check = solution.stats.get("plan_check") or {}
+    difference = check.get("relative_difference")
+    if check.get("cost") is None or difference is None or abs(difference) <= PLAN_TOLERANCE:
+        return None
+    return float(check["cost"])
+
+
 def plan_warning(solution: Any) -> str | None:
     """Why J is not to be trusted when the plan check (``stats["plan_check"]``) exceeds :data:`PLAN_TOLERANCE`.
 
@@ -97,9 +109,9 @@ def plan_warning(solution: Any) -> str | None:
         return None
     if check.get("cost") is None:
         return f"the plan check could not re-integrate this plan ({check.get('integrator')}): J is unchecked"
-    difference = check["relative_difference"]
-    if difference is None or abs(difference) <= PLAN_TOLERANCE:
+    if unresolved_plan_cost(solution) is None:
         return None
+    difference = check["relative_difference"]
     return (
         f"the grid does not resolve this plan: its controls re-integrated give J = {check['cost']:.8g}, "
         f"{100 * abs(difference):.3g} % {'below' if difference > 0 else 'above'} the optimiser's (relative "

@@ -229,10 +229,6 @@ def _violations(flown: dict[str, dict[str, float]]) -> str:
     return "; ".join(parts)
 
 
-#: result.nc holds the full Σ(t) up to this many states, the variances beyond (as a field solution's file)
-FULL_SIGMA_STATES = 25
-
-
 def _dataset(problem: Any, flights: list[Any]) -> Any:
     """``result.nc``: every closed-loop run's flown path, Σ, cost and plans, with CF names and units."""
     import xarray as xr
@@ -242,6 +238,8 @@ def _dataset(problem: Any, flights: list[Any]) -> Any:
 
     def attrs(long_name: str, units: str) -> dict[str, str]:
         return {"long_name": long_name, "units": units}
+
+    from ...ocp.field import FULL_SIGMA_STATES  # as a field solution's file
 
     if problem.n <= FULL_SIGMA_STATES:
         sigma = {"Sigma": (("run", "time", "row", "col"), np.stack([f.Sigma for f in flights]),

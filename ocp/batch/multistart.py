@@ -41,10 +41,8 @@ def solve_multistart(
     The returned solution's ``stats["multistart"]`` holds ``starts``, ``converged`` and ``optima``
     (one entry per distinct local optimum: cost, which starts reached it, final sensor positions).
     """
-    from .engine import open_client, refuse_in_a_worker_import, run_tasks
+    from .engine import open_client, run_tasks
 
-    if scheduler is None:
-        refuse_in_a_worker_import()
     payloads = [{"problem": problem.normalised(), "guess_seed": None if k == 0 else k} for k in range(starts)]
     solutions: list[Solution | None] = [None] * starts
     errors: list[str] = []

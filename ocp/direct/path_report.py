@@ -20,7 +20,7 @@ from ..collocation import collocation_scheme
 from ..path_constraints import group_names, margins
 from ..problem import Problem
 
-__all__ = ["ACTIVE_TOLERANCE", "FlownPath", "resimulate_sensors", "refine_maximum", "constraint_report"]
+__all__ = ["ACTIVE_TOLERANCE", "FlownPath", "resimulate_sensors", "refine_maximum", "rows_active", "constraint_report"]
 
 #: a group is active when a scaled row is within this of its bound at a node (Ipopt's tol is 1e-9) …
 ACTIVE_TOLERANCE = 1e-6
@@ -197,7 +197,7 @@ def constraint_report(problem: Problem, tr: Any, result: Any, P: np.ndarray, u: 
         largest, when = refine_maximum(lambda times, name=name: margins(constraints, *flown.at(times), only=name)[name],
                                        t, violation[name])  # fmt: skip
         out[name] = {
-            "active": _active(rows[:, mask], lam_nlp[:, mask]),
+            "active": rows_active(rows[:, mask], lam_nlp[:, mask]),
             "max_violation": largest,
             "max_violation_time": when,
             "max_violation_at_nodes": float(at_nodes[name].max()),
@@ -207,7 +207,7 @@ def constraint_report(problem: Problem, tr: Any, result: Any, P: np.ndarray, u: 
     return out
 
 
-def _active(rows: np.ndarray, multipliers: np.ndarray) -> bool:
+def rows_active(rows: np.ndarray, multipliers: np.ndarray) -> bool:
     """Whether rows ``g ≤ 0`` bind: one within ACTIVE_TOLERANCE of its bound, or a multiplier of ACTIVE_MULTIPLIER.
 
     An interior-point optimum keeps every row a little inside its bound (slack × multiplier ≈ μ), so the slack
@@ -235,7 +235,7 @@ def _control_report(problem: Problem, tr: Any, u: np.ndarray, rows: np.ndarray, 
     largest, at = refine_maximum(interval_excess, s, excess[k])
     h = (problem.horizon.tf - problem.horizon.t0) / K
     return {
-        "active": _active(rows, lam_nlp),
+        "active": rows_active(rows, lam_nlp),
         "max_violation": largest,
         "max_violation_time": float(problem.horizon.t0 + h * (k + at)),
         "max_violation_at_nodes": float((np.linalg.norm(u[:, :, bounded], axis=-1) - u_max).max()),

@@ -102,8 +102,9 @@ def leaf_sensitivities(problem: Problem, blocks: dict[str, np.ndarray]) -> dict[
         out |= _matrix_leaves("process.Sigma0", _symmetric(blocks["Sigma0"]))
     d_loc = np.zeros_like(mats["locations"])
     for i, sensor in enumerate(problem.sensors):
-        rows = np.abs(problem.measurement_rows(i))
-        d_loc += (rows / rows.sum(axis=1, keepdims=True)).T @ np.asarray(blocks[f"rowloc_{i}"])
+        if not field:  # a field's locations are its grid's: no numbers of the file
+            rows = np.abs(problem.measurement_rows(i))
+            d_loc += (rows / rows.sum(axis=1, keepdims=True)).T @ np.asarray(blocks[f"rowloc_{i}"])
         key = f"sensors[{i}]"
         if sensor.measures is not None and not problem.is_point(i):
             out |= _matrix_leaves(f"{key}.measures", _measures_gradient(problem, i, blocks))

@@ -631,8 +631,13 @@ def test_the_time_estimate_counts_the_substeps_a_running_cost_takes():
     mean = shooting_estimate(problem)
     fine = FieldShooting(problem, problem.solver.shooting.intervals)
     assert f"m = {fine.m} RK4" in mean.what and fine.m >= 4 and "m = 4" not in zero.what
-    from mobisense.ocp.field import shooting_seconds
+    from mobisense.ocp.field import COARSE_H_LAMBDA, STEP_ITERATIONS, shooting_seconds
 
-    K = problem.solver.shooting.intervals  # the fine phase's bound grows with m (1 → 4); the coarse one's does not
-    expected = shooting_seconds(problem.n, K, 4, problem.N) - shooting_seconds(problem.n, K, 1, problem.N)
-    assert mean.seconds - zero.seconds == pytest.approx(expected, rel=1e-12)
+    # both phases' bounds take the solver's own substeps (the coarse grid's too, since the rule is shared): 1 → 4
+    o, n, N = problem.solver.shooting, problem.n, problem.N
+    coarse = FieldShooting(problem, o.coarse_intervals, scaling="energy", max_h_lambda=COARSE_H_LAMBDA)
+    steps = STEP_ITERATIONS * len(o.homotopy)
+    expected = (shooting_seconds(n, o.intervals, fine.m, N) - shooting_seconds(n, o.intervals, 1, N)
+                + shooting_seconds(n, o.coarse_intervals, coarse.m, N, steps)
+                - shooting_seconds(n, o.coarse_intervals, 1, N, steps))  # fmt: skip
+    assert coarse.m == 4 and mean.seconds - zero.seconds == pytest.approx(expected, rel=1e-12)
