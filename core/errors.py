@@ -99,14 +99,16 @@ def _describe(exc: BaseException) -> str:
 def numerical_failures(what: str) -> Iterator[None]:
     """Turn the exceptions of numerical code inside the block into one :class:`ComputationError`.
 
+    ``ArithmeticError`` (overflow, division by zero, ``FloatingPointError``), ``ValueError`` (which includes
+    ``numpy.linalg.LinAlgError`` and the value errors of scipy and numpy on non-finite or ill-shaped data),
+    ``RuntimeError`` (CasADi, integrators) and ``MemoryError`` become ``ComputationError("{what}: …")``;
+    :class:`ConfigError`, :class:`ComputationError`, :class:`OutputError` and ``KeyboardInterrupt`` pass through
+    unchanged.
+
     Parameters
     ----------
     what : str
         What was being computed, for the message (``"solving problems/x.yaml"``).
-
-    ``ArithmeticError`` (overflow, division by zero), ``FloatingPointError``, ``numpy.linalg.LinAlgError``,
-    ``RuntimeError`` (CasADi, integrators) and ``MemoryError`` become ``ComputationError("{what}: …")``;
-    :class:`ConfigError`, :class:`OutputError` and ``KeyboardInterrupt`` pass through unchanged.
     """
     try:
         yield

@@ -185,7 +185,7 @@ class FieldKernel(StrictModel):
             return float(np.sqrt(2.0 * 46.0) * ell)
         if self.type == "exponential":
             return 46.0 * ell
-        return float(50.8 / np.sqrt(3.0) * ell)  # (1 + a) e^(−a) = 1e-20 at a ≈ 50.8
+        return float(50.8 / np.sqrt(3.0) * ell)  # (1 + a) e^(−a) ≈ 4.5e-21 at a = 50.8 (1e-20 at a ≈ 50.0)
 
 
 class FieldSpec(StrictModel):

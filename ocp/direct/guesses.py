@@ -16,7 +16,7 @@ from ..problem import Problem
 from ..simulate import Trajectory, coast, sine_controlled
 from .transcription import DirectCollocation, transcription_for
 
-__all__ = ["state_grid", "initial_guess", "coasting_baseline", "coasting_start", "random_guess"]
+__all__ = ["state_grid", "initial_guess", "coasting_baseline", "cost_scale", "coasting_start", "random_guess"]
 
 
 def state_grid(tr: DirectCollocation, t0: float, tf: float) -> tuple[np.ndarray, np.ndarray]:
@@ -37,6 +37,15 @@ def coasting_baseline(problem: Problem, t_eval: np.ndarray, tr: DirectCollocatio
     return coast(tr.model, P, t_eval)
 
 
+def cost_scale(coasting_cost: float) -> float:
+    """The cost scale c_s of the NLP objective J / c_s: the coasting cost (docs/theory/direct.md §1.3).
+
+    It follows the cost however small (M SPD makes it > 0): an absolute floor would make tiny-cost problems
+    (M = 1e-40) optimise the control energy alone; 1e-300 only keeps the division finite.
+    """
+    return max(abs(float(coasting_cost)), 1e-300)
+
+
 def coasting_start(problem: Problem, tr: DirectCollocation, eps: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """(P at ``eps``, coasting guess w0): the parameters and start of a cold solve, as :func:`solve_direct` makes them.
 
@@ -45,7 +54,7 @@ def coasting_start(problem: Problem, tr: DirectCollocation, eps: float = 1.0) ->
     values = tr.layout.values(problem)
     t_grid, _ = state_grid(tr, problem.horizon.t0, problem.horizon.tf)
     coasting = coast(tr.model, tr.layout.pack(values), t_grid)
-    values["cost_scale"] = max(abs(coasting.cost), 1e-8)
+    values["cost_scale"] = cost_scale(coasting.cost)
     P = tr.layout.pack({**values, "eps": eps})
     return P, initial_guess(tr, coasting, P)
 

@@ -18,7 +18,7 @@ import numpy as np
 from ..problem import Problem
 from ..simulate import Trajectory, coast
 from ..solution import HomotopyStep, Solution, SolveStatus, StartKind
-from .guesses import initial_guess, state_grid
+from .guesses import cost_scale, initial_guess, state_grid
 from .path_report import constraint_report
 from .stiff_start import coarse_grid_hint
 from .strategy import Continuation, SolveContext, run_strategy, solve_labelled
@@ -176,9 +176,7 @@ def _context(
             f"the no-control (coasting) solution is not finite (J = {coasting.cost:g}): the covariance or the cost "
             "overflows over the horizon; rescale the problem"
         )
-    # the NLP objective is J / cost_scale = O(1): the scale follows the cost however small (M SPD makes it > 0);
-    # an absolute floor would make tiny-cost problems (M = 1e-40) optimise the control energy alone
-    values["cost_scale"] = max(abs(coasting.cost), 1e-300)
+    values["cost_scale"] = cost_scale(coasting.cost)  # the NLP objective is J / cost_scale = O(1)
     ctx = SolveContext(problem, tr, values, lambda P: initial_guess(tr, coasting, P), progress)
     return ctx, coasting, order
 

@@ -170,3 +170,25 @@ def test_watched_iterations_are_reported_with_ipopts_objective_and_violation(mon
     seen.clear()
     again = tr.solve(P, w0)  # outside the block: nothing reported
     assert seen == []
+
+
+def test_coasting_start_scales_the_cost_as_the_solver_does_however_small():
+    """The cost scale is the coasting cost itself, also below 1e-8 (docs/theory/direct.md §1.3).
+
+    ``coasting_start`` (the tests' and benchmarks' cold start) once floored it at 1e-8 while the solver did not,
+    so the two started different NLPs on a problem of tiny cost; here M = 20e-20 gives J_coast ≈ 1.6e-17.
+    """
+    from reference_problems import hussein2008
+
+    from mobisense.ocp.direct.guesses import coasting_baseline
+
+    data = hussein2008()
+    data["cost"]["M"] = [[20e-20]]
+    problem = Problem.from_dict(data)
+    tr = DirectCollocation(Structure.of(problem), "radau", 3, 20, codegen="off")
+    P, _ = coasting_start(problem, tr)
+    t = np.array([problem.horizon.t0, problem.horizon.tf])
+    j_coast = coasting_baseline(problem, t, tr).cost
+    assert 0 < j_coast < 1e-15
+    # the same coasting integration on the same grid: equal to round-off (1e-12 relative)
+    np.testing.assert_allclose(np.asarray(tr.layout.unpack(P)["cost_scale"]).item(), j_coast, rtol=1e-12)
