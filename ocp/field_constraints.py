@@ -1,5 +1,8 @@
 """Path constraints of a field's shooting NLP: its rows, and their activity and violation at the solution.
 
+:func:`shooting_control_report` gives the ``u_max`` group of the same report: the controls are piecewise linear
+between the nodes, so |u(t)| is convex on each interval and its largest value is at a node.
+
 :func:`path_row_function` gives the rows of eq. path.1–5 of one instant as a CasADi function of the sensors'
 positions and velocities (the shooting has no collocation model to hold them). The NLP holds them at its K
 nodes; the sensors between them fly the piecewise-linear controls exactly (eq. field.7,
@@ -27,7 +30,7 @@ from .path_constraints import (
 )
 from .problem import Problem
 
-__all__ = ["path_row_function", "shooting_constraint_report"]
+__all__ = ["path_row_function", "shooting_constraint_report", "shooting_control_report"]
 
 #: samples of the flown path per interval before the maxima are refined
 SAMPLES_PER_INTERVAL = 20
@@ -124,3 +127,42 @@ def shooting_constraint_report(problem: Problem, trajectory: Any, rows: np.ndarr
             "units": speed if name == "max_speed" else length,
         }
     return out
+
+
+def shooting_control_report(problem: Problem, trajectory: Any, rows: np.ndarray, multipliers: np.ndarray,
+                            cost_scale: float) -> dict[str, Any]:  # fmt: skip
+    """The ``u_max`` group of a shooting solution: |u| − u_max of the bounded sensors, activity, multipliers.
+
+    Parameters
+    ----------
+    problem : Problem
+        With at least one sensor's ``u_max``.
+    trajectory : ShootingTrajectory
+        Node times ``t`` (K + 1,) and controls ``u`` (K + 1, N, 2) (L/T²).
+    rows, multipliers : ndarray, shape (B·(K + 1),)
+        The NLP's rows |u|²/u_max² − 1 of the bounded sensors, sensor by sensor and node by node, and their
+        multipliers.
+    cost_scale : float
+        The NLP's objective is J / cost_scale.
+
+    Returns
+    -------
+    dict
+        As the ``u_max`` entry of :func:`mobisense.ocp.direct.path_report.constraint_report`: ``max_violation``
+        the largest |u(t)| − u_max (L/T²) on the whole path — at a node, since |u| is convex between nodes —
+        and ``max_multiplier`` the price of one L/T² of it, λ·c_s·2/u_max (the row's slope in |u| at the bound).
+    """
+    t, u = np.asarray(trajectory.t, float), np.asarray(trajectory.u, float)
+    bounded = [i for i, sensor in enumerate(problem.sensors) if sensor.u_max is not None]
+    u_max = np.array([problem.sensors[i].u_max for i in bounded])
+    excess = np.linalg.norm(u[:, bounded], axis=-1) - u_max  # (K + 1, B)
+    node = int(np.argmax(excess.max(axis=1)))
+    slope = np.repeat(2.0 / u_max, len(t))  # rows are sensor-major, as the NLP holds them
+    return {
+        "active": rows_active(rows, multipliers),
+        "max_violation": float(excess.max()),
+        "max_violation_time": float(t[node]),
+        "max_violation_at_nodes": float(excess.max()),
+        "max_multiplier": float((np.abs(multipliers) * cost_scale * slope).max()),
+        "units": problem.units.system().of(length=1, time=-2),
+    }

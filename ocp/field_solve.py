@@ -15,7 +15,7 @@ import numpy as np
 
 from ..core.config import ConfigError
 from .field import COARSE_H_LAMBDA, FULL_SIGMA_STATES
-from .field_constraints import shooting_constraint_report
+from .field_constraints import shooting_constraint_report, shooting_control_report
 from .problem import Problem
 from .shooting import FieldShooting
 from .solution import HomotopyStep, Solution, SolveStatus, StartKind
@@ -149,12 +149,15 @@ def solve_shooting(
         "trace_Sigma_tf_reduction_percent": 100.0 * (1.0 - np.trace(result.Sigma[-1]) / baseline["trace_Sigma_tf"]),
         "min_sigma_eigenvalue": float(np.linalg.eigvalsh(result.Sigma).min()),
     }  # fmt: skip
+    if len(fine.bound_rows):
+        stats["constraints"] = {"u_max": shooting_control_report(
+            problem, result, info["g"][fine.bound_rows], info["lam_g"][fine.bound_rows], cost_scale)}  # fmt: skip
     if problem.constraints is not None:  # the path rows are the last K·R of g, node by node
         R = len(fine.path_groups)
-        stats["constraints"] = shooting_constraint_report(
+        stats.setdefault("constraints", {}).update(shooting_constraint_report(
             problem, result, info["g"][-fine.K * R :].reshape(fine.K, R),
             info["lam_g"][-fine.K * R :].reshape(fine.K, R), fine.path_units, fine.path_groups, cost_scale,
-        )  # fmt: skip
+        ))  # fmt: skip
     message = f"Ipopt (L-BFGS, ε = 1 on K = {fine.K}): {info['status']}"
     if not info["success"]:
         worst = fine.worst_violation(fine.rows(w, cost_scale), float(fine.parameters(1.0, cost_scale)[2]))

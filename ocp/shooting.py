@@ -133,6 +133,8 @@ class FieldShooting:
                                 t0 + (k + 1) * h, length if j < 2 * N else speed, None, None)
                                for k in range(K) for j in range(4 * N)] + self.row_labels  # fmt: skip
         self.nlp = {"x": x, "p": P, "f": objective, "g": g}
+        #: rows |u|²/u_max² − 1 of the bounded sensors in g, sensor by sensor and node by node
+        self.bound_rows = np.array([j for j, label in enumerate(self.row_labels) if label[3] is not None], dtype=int)
         self._rows = ca.Function("rows", [x, P], [g])
         self._cost_terms = ca.Function("cost_terms", [x, P], [phi, running + energy, energy])
         self.trajectory = ca.Function("trajectory", [x, P], [ca.horzcat(*Zs), ca.horzcat(*pos), ca.horzcat(*vel), U])
