@@ -130,6 +130,7 @@ def solve_shooting(
         coarse_time = time.perf_counter() - t_coarse
         w = fine.controls_to_w(rough.t, rough.u, cost_scale)
     t0 = time.perf_counter()
+    w_start = w
     w, info = fine.solve(w, 1.0, cost_scale, tol, problem.solver.max_iterations, o.memory, problem.solver.time_limit)
     result = fine.evaluate(w, cost_scale)
     record(1.0, result.costs[0] + result.costs[1], info, t0)
@@ -160,6 +161,7 @@ def solve_shooting(
         ))  # fmt: skip
     message = f"Ipopt (L-BFGS, ε = 1 on K = {fine.K}): {info['status']}"
     if not info["success"]:
+        stats["unconverged"] = _unconverged(fine, w_start, w, cost_scale, info["status"])
         worst = fine.worst_violation(fine.rows(w, cost_scale), float(fine.parameters(1.0, cost_scale)[2]))
         if worst is not None:
             stats["worst_violation"] = worst
@@ -172,3 +174,19 @@ def solve_shooting(
         terminal_cost=result.costs[0], running_cost=result.costs[1], control_energy=result.costs[2],
         homotopy=steps, baseline=baseline, stats=stats,
     )  # fmt: skip
+
+
+def _unconverged(fine: FieldShooting, w_start: np.ndarray, w: np.ndarray, cost_scale: float,
+                 status: str) -> dict[str, Any]:  # fmt: skip
+    """What a failed fine solve ended on, against where it started.
+
+    Ipopt's status, and J and the largest scaled row violation (the rows are O(1) by construction) of the start and
+    the end: a caller can tell a feasible plan that only ran out of iterations and improved on its start
+    (re-planning flies it: :func:`mobisense.ocp.replan_window.unconverged_plan_flyable`).
+    """
+    ends = {}
+    for name, point in (("start", w_start), ("end", w)):
+        costs = fine.evaluate(point, cost_scale).costs
+        ends[name] = (costs[0] + costs[1], float(fine.row_excess(fine.rows(point, cost_scale)).max(initial=0.0)))
+    return {"status": status, "cost": ends["end"][0], "violation": ends["end"][1],
+            "start_cost": ends["start"][0], "start_violation": ends["start"][1]}  # fmt: skip

@@ -211,7 +211,7 @@ def fly(
         if replanner is not None and t >= next_replan - 1e-9 and tf - t > 2 * dt:
             new = replanner.solve(plan, t, p, v, Sigma)
             result.records.append(replanner.records[-1])
-            if new.success:
+            if replanner.records[-1].flown:
                 plan = new
                 result.plans.append(_plan_record(t, new))
                 u_plan, j_plan = controls(plan, j), j
@@ -309,6 +309,7 @@ def replan_monte_carlo(
         out[key] = {"median": float(np.median(values)), "max": float(np.max(values))} if values else {}
     out["replan_build_time_s"] = build_time
     out["replan_failures"] = sum(not x.success for x in records)
+    out["replan_flown_unconverged"] = sum(x.flown_unconverged for x in records)
     out["replan_relaxed"] = sum(bool(x.relaxed) for x in records)
     out["replan_relaxation_max"] = {
         group: max(x.relaxed[group] for x in records if group in x.relaxed)

@@ -19,6 +19,12 @@ A measured state may violate a path constraint that the plan kept (a current pus
 Euler's step overshot the speed limit by 1e-3): it is not bad input but the state to re-plan from. The window
 then relaxes each violated constraint just enough to hold it (:func:`relax_constraints`) and reports by how
 much; the next re-plan relaxes again from its own measured state, or not at all once the sensors are clear.
+
+A field's window that stops at Ipopt's iteration or time limit (L-BFGS can stall beside an active constraint:
+on the island re-plan, J was within 1e-5 of its end after 75 iterations and the solve ran on to its 500) is
+still flown when its plan is feasible — every scaled row within Ipopt's ``constr_viol_tol`` — and no worse than
+its start, the previous plan flown from the measured state: what the flight would fly otherwise
+(:func:`unconverged_plan_flyable`, suboptimal MPC). The record says so (``ReplanRecord.flown_unconverged``).
 """
 
 from __future__ import annotations
@@ -40,6 +46,8 @@ __all__ = [
     "window_problem",
     "Replanner",
     "ReplanRecord",
+    "FEASIBLE_ROW_VIOLATION",
+    "unconverged_plan_flyable",
 ]
 
 WarmStart = Literal["shifted", "reused", "cold"]
@@ -59,6 +67,28 @@ def cost_to_go_weight(A: np.ndarray, M: np.ndarray, K: np.ndarray, remaining: fl
 
 #: a relaxed constraint clears the measured state by this fraction of its own size (radius, d_min, v_max, extent)
 RELAXATION = 1e-3
+
+#: the largest violation of a scaled row (O(1) by construction) of a plan still feasible: Ipopt's default
+#: ``constr_viol_tol``, what it asks of a solution it calls optimal
+FEASIBLE_ROW_VIOLATION = 1e-4
+#: the Ipopt statuses of a solve that stopped on a budget, not on a failure of its own
+BUDGET_STATUSES = ("Maximum_Iterations_Exceeded", "Maximum_WallTime_Exceeded", "Maximum_CpuTime_Exceeded")
+
+
+def unconverged_plan_flyable(solution: Any) -> bool:
+    """Whether a failed window solve's plan is fit to fly: it stopped on a budget, is feasible and improved its start.
+
+    ``solution.stats["unconverged"]`` (a field's shooting solve, :func:`mobisense.ocp.field_solve.solve_shooting`)
+    holds its Ipopt status and the J and largest scaled row violation of its start and end. Its start is the
+    previous plan flown from the measured state; when that start broke a row by more than
+    :data:`FEASIBLE_ROW_VIOLATION`, any feasible end is better than it.
+    """
+    record = solution.stats.get("unconverged") if not solution.success else None
+    if not record or record["status"] not in BUDGET_STATUSES or not np.isfinite(record["cost"]):
+        return False
+    if record["violation"] > FEASIBLE_ROW_VIOLATION:
+        return False
+    return record["start_violation"] > FEASIBLE_ROW_VIOLATION or record["cost"] <= record["start_cost"]
 
 
 def relax_constraints(constraints: dict[str, Any], p: np.ndarray, v: np.ndarray) -> dict[str, float]:
@@ -157,6 +187,7 @@ class ReplanRecord:
     """What one re-solve cost: instant (T), window end (T), intervals, Ipopt iterations, wall time (s), success.
 
     ``relaxed``: the constraints relaxed for it, group -> the measured state's violation (physical units).
+    ``flown_unconverged``: it failed on a budget but its plan was flown (:func:`unconverged_plan_flyable`).
     """
 
     t: float
@@ -166,6 +197,12 @@ class ReplanRecord:
     time_s: float
     success: bool
     relaxed: dict[str, float] = field(default_factory=dict)
+    flown_unconverged: bool = False
+
+    @property
+    def flown(self) -> bool:
+        """Whether the re-solve's plan replaced the previous one."""
+        return self.success or self.flown_unconverged
 
 
 @dataclass
@@ -262,7 +299,8 @@ class Replanner:
         new = self.solved(sub, init, tr)
         elapsed = time.perf_counter() - start
         iterations = sum(step.iterations for step in new.homotopy)
-        self.records.append(ReplanRecord(t, t_end, K, iterations, elapsed, new.success, relaxed))
+        self.records.append(ReplanRecord(t, t_end, K, iterations, elapsed, new.success, relaxed,
+                                         unconverged_plan_flyable(new)))  # fmt: skip
         return new
 
     def _direct_start(self, previous: Any, sub: Problem, tr: Any, t: float, t_end: float) -> Any:

@@ -186,6 +186,10 @@ class FieldShooting:
             ubg += [0.0] * (self.K * len(labels))
         return (ca.vertcat(*g) if g else ca.MX(0, 1)), np.array(lbg), np.array(ubg)
 
+    def row_excess(self, g: np.ndarray) -> np.ndarray:
+        """How far each scaled row of ``g`` lies outside its bounds (0 where it holds), shape of ``g``."""
+        return np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0)
+
     def worst_violation(self, g: np.ndarray, u_scale: float) -> dict[str, Any] | None:
         """The most violated constraint of the rows ``g`` of a solve, in physical units (None: there are none).
 
@@ -196,7 +200,7 @@ class FieldShooting:
         """
         if not len(g):
             return None
-        excess = np.maximum(np.maximum(self.lbg - g, g - self.ubg), 0.0)
+        excess = self.row_excess(g)
         if not excess.max(initial=0.0) > 0.0:  # every row holds: the solve failed for another reason
             return None
         j = int(np.argmax(excess))

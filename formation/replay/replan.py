@@ -15,7 +15,8 @@ Example (``problems/replan_drift.yaml``)::
 with the same noise draws (:func:`mobisense.ocp.replan.replan_monte_carlo`) and writes ``summary.json``
 (``closed_loop``, ``open_loop``, ``no_control``: ``{cost_mean, cost_std, cost_stderr}``,
 ``replan_solve_time_s``, ``replan_iterations``, ``replan_every_s``, ``horizon``, ``replan_failures``,
-``replan_relaxed``, ``replan_relaxation_max`` and, with path constraints, ``flown_violation``), ``result.nc`` (the flown
+``replan_flown_unconverged``, ``replan_relaxed``, ``replan_relaxation_max`` and, with path constraints,
+``flown_violation``), ``result.nc`` (the flown
 paths and Σ of every closed-loop run and the plans made along every run, ``run × plan × plan_node``) and
 ``replan.png`` (the plans of run 0 fanning out along its flown path).
 """
@@ -119,7 +120,7 @@ class ReplanResult(SimulationResult):
         print(
             f"  re-solves: median {1e3 * s['replan_solve_time_s']['median']:.1f} ms, max "
             f"{1e3 * s['replan_solve_time_s']['max']:.1f} ms, {s['replan_iterations']['median']:g} iterations "
-            f"(median); {s['replan_failures']} failed{_relaxations(s)}"
+            f"(median); {s['replan_failures']} failed{_unconverged(s)}{_relaxations(s)}"
         )
         if "flown_violation" in s:
             print(f"  flown paths: {_violations(s['flown_violation'])}")
@@ -208,6 +209,12 @@ def run_replan(config: ReplanScenario, source: Path, seed: int | None = None) ->
     flights = r.pop("flights")
     summary = {"kind": "replan", "problem": problem.name, **r}
     return ReplanResult(_dataset(problem, flights), summary)
+
+
+def _unconverged(s: dict[str, Any]) -> str:
+    """The failed re-solves whose plans were flown (stopped on a budget, feasible, better than the plan)."""
+    flown = s.get("replan_flown_unconverged", 0)
+    return f" ({flown} of them flown unconverged: feasible and better than the plan they replaced)" if flown else ""
 
 
 def _relaxations(summary: dict[str, Any]) -> str:

@@ -262,3 +262,47 @@ def test_a_field_re_planned_without_disturbance_reproduces_its_plan_and_beats_th
     closed, open_ = r["closed_loop"], r["open_loop"]  # measured 0.297 ± 0.004 against 0.337 ± 0.009
     assert r["replan_failures"] == 0
     assert closed["cost_mean"] + closed["cost_stderr"] < open_["cost_mean"] - open_["cost_stderr"]
+
+
+def test_a_field_window_that_runs_out_of_iterations_is_flown_when_feasible_and_better_than_its_start() -> None:
+    # red-team audit: on the island re-plan (4 gliders, a disc, a separation) the t = 4 window's L-BFGS solve came
+    # within 1e-5 of its end J in 75 iterations and stalled to its 500 (73 s); the flight then kept the previous plan,
+    # whose J from the measured state was 46 % higher. A window that stops on its budget, feasible and better than
+    # its start, is flown (suboptimal MPC); its J and its start's are checked here by DOP853 (check_field_plan)
+    from mobisense.ocp.field_plan_check import check_field_plan
+    from mobisense.ocp.replan_window import FEASIBLE_ROW_VIOLATION, unconverged_plan_flyable
+
+    problem = _field_problem()
+    data = problem.normalised()
+    data["solver"]["max_iterations"] = 4
+    budget = Problem.from_dict(data)
+    plan = Replanner(problem).first_plan()
+    assert plan.success
+    replanner = Replanner(budget)
+    t, k = 1.25, 10  # node 10 of 40 on [0, 5]
+    p = plan.p[k] + np.array([[0.3, -0.2], [-0.25, 0.15]])  # pushed off the plan by a current
+    new = replanner.solve(plan, t, p, plan.v[k], plan.Sigma[k])
+    record, unconverged = replanner.records[-1], new.stats["unconverged"]
+    assert not new.success and unconverged["status"] == "Maximum_Iterations_Exceeded"
+    assert record.flown_unconverged and record.flown and unconverged_plan_flyable(new)
+    assert unconverged["violation"] <= FEASIBLE_ROW_VIOLATION  # no constraints but kinematics: exactly feasible
+    # the end's J and the start's (the previous plan's controls flown from the measured state), re-integrated:
+    # the shooting's own error is ≈ 1e-7 relative (field.md §3.3), so 1e-5 separates a wrong J from a right one
+    assert check_field_plan(new)["cost"] == pytest.approx(unconverged["cost"], rel=1e-5)
+
+    class Start:  # the shifted start: the previous plan's controls at the window's nodes, flown from (p, v)
+        t_u = new.t_u
+        u = np.stack([np.stack([np.interp(new.t_u, plan.t_u, plan.u[:, i, c]) for c in range(2)], axis=-1)
+                      for i in range(problem.N)], axis=1)  # (K + 1, N, 2)  # fmt: skip
+        cost = 0.0
+
+    Start.problem = new.problem
+    assert check_field_plan(Start)["cost"] == pytest.approx(unconverged["start_cost"], rel=1e-5)
+    assert unconverged["cost"] < unconverged["start_cost"]
+    # a start that the budget did not improve on is not flown; nor is an infeasible end, nor a failure of another kind
+    for change in ({"cost": unconverged["start_cost"] * 1.01}, {"violation": 10 * FEASIBLE_ROW_VIOLATION},
+                   {"status": "Restoration_Failed"}):  # fmt: skip
+        new.stats["unconverged"] = {**unconverged, **change}
+        assert not unconverged_plan_flyable(new)
+    new.stats["unconverged"] = {**unconverged, "cost": unconverged["start_cost"] * 1.01, "start_violation": 1.0}
+    assert unconverged_plan_flyable(new)  # any feasible end beats a start that breaks the constraints
