@@ -29,7 +29,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from ...core.config import FiniteFloat, InvalidValue, NonNegativeFloat, PositiveFloat, StrictModel
+from ...core.config import FiniteFloat, InvalidValue, NonNegativeFloat, PositiveFloat, Seed, StrictModel
 from ..simulation_result import SimulationResult
 
 __all__ = [
@@ -70,7 +70,7 @@ class DisturbanceOptions(StrictModel):
 
     drift: list[FiniteFloat] = Field([0.0, 0.0], min_length=2, max_length=2, description="current (L/T)")
     force_noise_std: NonNegativeFloat = 0.0
-    seed: int = 1
+    seed: Seed = 1
 
 
 class MonteCarloOptions(StrictModel):

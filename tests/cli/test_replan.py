@@ -119,3 +119,16 @@ def test_bad_replan_files_exit_2_with_the_key_path_and_write_nothing(tmp_path, c
     assert cli.main(["replay", str(path), "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert key in err and len(err.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_a_negative_disturbance_seed_exits_2_naming_it(tmp_path, capsys) -> None:
+    # red team: validate passed it and replay exited 1 with numpy's "expected non-negative integer"
+    path = _files(tmp_path)
+    data = yaml.safe_load(path.read_text())
+    data["disturbance"]["seed"] = -1
+    path.write_text(yaml.safe_dump(data))
+    assert cli.main(["validate", str(path)]) == 2
+    out = tmp_path / "out"
+    assert cli.main(["replay", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "disturbance.seed" in err and len(err.strip().splitlines()) == 2 and not out.exists()  # one per command
