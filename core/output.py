@@ -23,6 +23,8 @@ __all__ = [
     "LOCK_NAME",
     "OutputFolder",
     "default_output_folder",
+    "input_files",
+    "is_output_name",
     "output_path",
     "remove_stale_temporaries",
 ]
@@ -36,6 +38,46 @@ TEMPORARY = re.compile(r"^\..+\.[a-z0-9_]{8}\.tmp$")
 #: file systems nothing is written to
 _VIRTUAL_FS = {"proc", "sysfs", "devtmpfs", "devpts", "cgroup", "cgroup2", "debugfs", "securityfs", "tracefs",
                "configfs", "fusectl", "pstore", "bpf", "mqueue", "hugetlbfs", "autofs", "binfmt_misc"}  # fmt: skip
+
+
+#: the names of the files the commands write (figures and animations besides: :func:`is_output_name`)
+OUTPUT_NAMES = frozenset({"summary.json", "solution.nc", "result.nc", "results.parquet", "sweep.json", "snapshot.nc",
+                          "trace_grid.nc"})  # fmt: skip
+#: a sweep's part files (``tasks/part-000001.nc``, results parts)
+PART_FILE = re.compile(r"^part-\d+\.(nc|parquet)$")
+
+
+def is_output_name(name: str) -> bool:
+    """Whether a file of this name may be written by a command into its output folder (or a folder under it)."""
+    return name in OUTPUT_NAMES or Path(name).suffix in (".png", ".gif", ".mp4") or bool(PART_FILE.match(name))
+
+
+def input_files(source: str | Path, config: object = None) -> list[Path]:
+    """The command's input file and the existing files its ``config`` names, relative to it (resolved).
+
+    ``config`` (a validated model, dict or list) is walked for strings that name an existing file beside
+    ``source``: a replay's ``solution`` and ``problem``, a re-plan's ``problem``, a sweep's ``base``. What an output
+    folder must not overwrite (:meth:`OutputFolder.check`).
+    """
+    source = Path(source)
+    found = [source.resolve()]
+    stack = [config]
+    while stack:
+        item = stack.pop()
+        if hasattr(item, "model_dump"):
+            stack.append(item.model_dump())
+        elif isinstance(item, dict):
+            stack.extend(item.values())
+        elif isinstance(item, (list, tuple)):
+            stack.extend(item)
+        elif isinstance(item, str) and 0 < len(item) < 4096 and "\0" not in item:
+            candidate = source.parent / item
+            try:
+                if candidate.is_file():
+                    found.append(candidate.resolve())
+            except OSError:  # a name too long for the file system, …: not a file
+                pass
+    return found
 
 
 def output_path(text: str) -> Path:
@@ -117,17 +159,27 @@ class OutputFolder:
 
     # ------------------------------------------------------------------ checks (nothing created)
     @classmethod
-    def check(cls, path: str | Path, option: str = "--out") -> OutputFolder:
+    def check(cls, path: str | Path, option: str = "--out", inputs: list[Path] | tuple[Path, ...] = ()) -> OutputFolder:
         """Refuse an output folder that cannot be used, before any work and without creating anything.
+
+        ``inputs``: the files the command reads (:func:`input_files`); none may be one the command would write.
 
         Raises
         ------
         ConfigError
             ``path`` exists and is not a folder, is a dangling symbolic link, lies under a file, on a
-            virtual file system (``/proc``, ``/sys``, ``/dev``) or in a folder this process may not write.
+            virtual file system (``/proc``, ``/sys``, ``/dev``) or in a folder this process may not write, or
+            holds an input under the name of an output (``solve summary.json --out .``; a replay of
+            ``out/solution.nc`` into ``out``).
         """
         folder = cls(Path(path), option)
         p = folder.path
+        if p.is_dir():
+            inside = p.resolve()
+            for item in inputs:
+                if is_output_name(item.name) and inside in item.parents:
+                    folder._fail(f"holds the input {item}, which this command would overwrite with its "
+                                 f"{item.name}; choose another folder")  # fmt: skip
         try:
             os.getcwd()
         except FileNotFoundError:

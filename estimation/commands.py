@@ -38,7 +38,7 @@ class SteadyStateCommand:
         from ..core.errors import ComputationError, numerical_failures
         from ..core.examples import resolve_input
         from ..core.kinds import load_as
-        from ..core.output import OutputFolder, default_output_folder
+        from ..core.output import OutputFolder, default_output_folder, input_files
         from .cooperative.design_study import design_formation, formation_estimates
 
         args.formation = resolve_input(args.formation)
@@ -47,7 +47,8 @@ class SteadyStateCommand:
         grid = config.contour_resolution**2
         estimates = [Estimate("the tr P grid", 8.0 * 8 * grid, "a lower contour_resolution", 2e-6 * grid)]
         check_budget(estimates + formation_estimates(config), args.max_memory, source, args.max_time)
-        folder = OutputFolder.check(args.out if args.out is not None else default_output_folder(args.formation))
+        folder = OutputFolder.check(args.out if args.out is not None else default_output_folder(args.formation),
+                                    inputs=input_files(args.formation, config))
         with folder.lock():
             out = folder.path
             with numerical_failures(f"designing {source}"):

@@ -113,7 +113,7 @@ def _simulate(args: argparse.Namespace, kind: str, run: Callable[[Any], Any]) ->
     from ..core.budget import check_budget
     from ..core.errors import numerical_failures
     from ..core.examples import resolve_input
-    from ..core.output import OutputFolder, default_output_folder
+    from ..core.output import OutputFolder, default_output_folder, input_files
     from .scenarios import load_scenario
 
     args.scenario = resolve_input(args.scenario)
@@ -124,7 +124,8 @@ def _simulate(args: argparse.Namespace, kind: str, run: Callable[[Any], Any]) ->
 
         raise ConfigError(f"{source}: --animate: only a field replay is animated, this is a {scenario.kind} file")
     check_budget(scenario.estimates(), args.max_memory, source, args.max_time)
-    folder = OutputFolder.check(args.out if args.out is not None else default_output_folder(args.scenario))
+    folder = OutputFolder.check(args.out if args.out is not None else default_output_folder(args.scenario),
+                                inputs=input_files(args.scenario, scenario.config))
     with folder.lock():
         with numerical_failures(f"simulating {source}"):
             result = run(scenario)

@@ -113,7 +113,7 @@ def _solve(args: argparse.Namespace, figures: Any) -> int:
     from ..core.errors import numerical_failures
     from ..core.examples import resolve_input
     from ..core.kinds import check_command_kind
-    from ..core.output import OutputFolder, default_output_folder
+    from ..core.output import OutputFolder, default_output_folder, input_files
     from .batch.cluster import Cluster
     from .problem import Problem
     from .reporting import SolveReporter
@@ -171,7 +171,8 @@ def _solve(args: argparse.Namespace, figures: Any) -> int:
     local = 0 if args.multistart is None or cluster.scheduler else min(starts, _local_workers(cluster.workers))
     estimates = problem_estimates(problem, starts=starts, local_workers=local)
     check_budget(estimates, args.max_memory, source, args.max_time)
-    folder = OutputFolder.check(args.out if args.out is not None else default_output_folder(args.problem))
+    folder = OutputFolder.check(args.out if args.out is not None else default_output_folder(args.problem),
+                                inputs=input_files(args.problem))
     reporter = SolveReporter(problem, quiet=args.quiet)
     with folder.lock():
         out = folder.path

@@ -110,7 +110,7 @@ def run_sweep(
 
     from ...core.budget import check_budget
     from ...core.errors import ConfigError
-    from ...core.output import OutputFolder
+    from ...core.output import OutputFolder, input_files
     from .engine import open_client, refuse_in_a_worker_import, run_tasks
     from .results_store import ResultStore, check_manifest, value_kind, write_manifest
     from .sweep import sweep_digest, sweep_estimates, task_count
@@ -128,7 +128,7 @@ def run_sweep(
     check_budget(sweep_estimates(spec, base, local, source), max_memory, source, max_time)
     tasks = expand_sweep(spec, base, source=source)  # ConfigError -> nothing run or written
     check_budget(sweep_estimates(spec, base, local, source, tasks), max_memory, source, max_time)  # their largest
-    folder = OutputFolder.check(out)
+    folder = OutputFolder.check(out, inputs=input_files(path, spec))
     digest = sweep_digest(tasks)
     with folder.lock():
         out = folder.path

@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
+import json
 import os
 
 import pytest
 import yaml
-from reference_problems import hussein2008
+from reference_problems import PROBLEMS, hussein2008
 
 from mobisense.core.budget import Estimate, check_budget, default_memory_limit, parse_duration, parse_size
 from mobisense.core.config import ConfigError
-from mobisense.core.output import LOCK_NAME, OutputFolder, default_output_folder
+from mobisense.core.output import LOCK_NAME, OutputFolder, default_output_folder, input_files
 
 
 def test_sizes_and_durations():
@@ -136,3 +137,35 @@ def test_default_output_folder_is_sanitised():
     assert str(default_output_folder("problems/hussein2008.yaml")) == "out/hussein2008"
     assert str(default_output_folder("..yaml")) == "out/output"
     assert str(default_output_folder("a b/../c;rm -rf.yaml")) == "out/c_rm_-rf"
+
+
+def test_an_output_folder_holding_an_input_under_an_output_name_is_refused_before_anything_runs(tmp_path, capsys):
+    # red team: `solve summary.json --out .` replaced the problem file by the summary; a plan replay of
+    # kosol/solution.nc with --out kosol replaced the user's solution (and its summary) by another problem's
+    from mobisense import cli
+
+    data = yaml.safe_load((PROBLEMS / "hussein2008.yaml").read_text())
+    problem = tmp_path / "summary.json"
+    problem.write_text(json.dumps(data))
+    before = problem.read_bytes()
+    assert cli.main(["solve", str(problem), "--out", str(tmp_path), "--no-plot"]) == 2
+    err = capsys.readouterr().err
+    assert "holds the input" in err and "summary.json" in err and len(err.strip().splitlines()) == 1
+    assert problem.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["summary.json"]
+
+    kept = tmp_path / "kosol"
+    small = {**data, "solver": {**data["solver"], "collocation": {"intervals": 10}}}
+    (tmp_path / "small.yaml").write_text(yaml.safe_dump(small))
+    assert cli.main(["solve", str(tmp_path / "small.yaml"), "--out", str(kept), "--no-plot", "--quiet"]) == 0
+    capsys.readouterr()
+    before = {p.name: p.read_bytes() for p in kept.iterdir()}
+    (tmp_path / "h.yaml").write_text(yaml.safe_dump(data))  # another problem: the replay would solve it again
+    scenario = tmp_path / "pr.yaml"
+    scenario.write_text(yaml.safe_dump({"name": "pr", "solution": "kosol/solution.nc", "problem": "h.yaml",
+                                        "monte_carlo": {"runs": 2}}))  # fmt: skip
+    assert cli.main(["replay", str(scenario), "--out", str(kept), "--no-plot"]) == 2
+    err = capsys.readouterr().err
+    assert "holds the input" in err and "solution.nc" in err and len(err.strip().splitlines()) == 1
+    assert {p.name: p.read_bytes() for p in kept.iterdir()} == before
+    # an input beside the outputs under a name no command writes is no clash: problems/x.yaml --out problems/
+    assert OutputFolder.check(tmp_path, inputs=input_files(tmp_path / "small.yaml")).path == tmp_path
