@@ -91,6 +91,11 @@ def _describe(exc: BaseException) -> str:
             f"linear algebra failed ({text}): a covariance or gain matrix is singular or not positive definite in "
             "double precision; check that the noise levels and scales are not extreme"
         )
+    if text.endswith("Evaluation failed"):  # CasADi's, with the stack only: what failed inside a graph
+        return one_line(
+            "a CasADi function failed to evaluate (a linear solve on a singular matrix, or a NaN or infinity in the "
+            "covariance propagation): check that the noise levels, covariances and scales are not extreme"
+        )
     plain = isinstance(exc, RuntimeError) or type(exc).__name__ in text  # our own and CasADi's need no type
     return one_line(text if plain else f"{type(exc).__name__}: {text}")
 

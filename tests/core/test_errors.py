@@ -33,3 +33,26 @@ def test_other_value_errors_keep_their_type_and_input_errors_pass_unchanged() ->
             raise ValueError("bad shape")
     with pytest.raises(ConfigError, match=r"^x.yaml: key: expected$"), numerical_failures("solving x.yaml"):
         raise ConfigError("x.yaml: key: expected")
+
+
+def test_casadis_bare_evaluation_failure_is_explained() -> None:
+    # red team: a field with Σ0 = 1e20·I ended in CasADi's bare message (exit 1), the text below verbatim
+    raw = ".../casadi/core/function_internal.hpp:1766: Evaluation failed"
+    with pytest.raises(ComputationError, match=r"^solving x.yaml: a CasADi function failed to evaluate \(") as caught:
+        with numerical_failures("solving x.yaml"):
+            raise RuntimeError(raw)
+    assert ".hpp" not in str(caught.value) and "\n" not in str(caught.value)
+
+
+def test_a_field_prior_far_above_the_fields_variance_is_refused_with_its_key() -> None:
+    # red team: process.Sigma0 = 1e20·I on a 3 × 3 field of σ² = 1 ended in CasADi's "Evaluation failed" (exit 1)
+    from short_runs import field_problem
+
+    from mobisense.ocp.problem import FIELD_PRIOR_RATIO, Problem
+
+    data = field_problem(grid=(3, 3))
+    data["process"]["Sigma0"] = (FIELD_PRIOR_RATIO * 1.01 * np.eye(9)).tolist()
+    with pytest.raises(ConfigError, match=r"process\.Sigma0: expected variances at most 1e\+08 × the field's variance"):
+        Problem.from_dict(data)
+    data["process"]["Sigma0"] = (FIELD_PRIOR_RATIO * 0.99 * np.eye(9)).tolist()  # at the ceiling: accepted
+    assert Problem.from_dict(data).matrices()["Sigma0"][0, 0] == FIELD_PRIOR_RATIO * 0.99
