@@ -29,6 +29,7 @@ __all__ = [
     "implicit_riccati_step",
     "riccati_step",
     "fly",
+    "PlanFailed",
     "replan_monte_carlo",
 ]
 
@@ -230,6 +231,14 @@ def fly(
     return result
 
 
+class PlanFailed(RuntimeError):
+    """The plan a re-planning flight starts from failed: nothing is flown; ``solution`` is what was solved."""
+
+    def __init__(self, what: str, solution: Any) -> None:
+        super().__init__(f"{what} failed: {solution.message}")
+        self.what, self.solution = what, solution
+
+
 def replan_monte_carlo(
     problem: Problem,
     disturbance: Disturbance,
@@ -273,7 +282,7 @@ def replan_monte_carlo(
     plan = full if replanner.window(h.t0)[0] >= h.tf else replanner.first_plan()
     for what, solution in (("the full-horizon plan", full), ("the first window's plan", plan)):
         if not solution.success:
-            raise RuntimeError(f"{what} failed: {solution.message}")
+            raise PlanFailed(what, solution)
     costs: dict[str, list[float]] = {"closed_loop": [], "open_loop": [], "no_control": []}
     violations: dict[str, dict[str, float]] = {name: {} for name in costs}
     flights = []

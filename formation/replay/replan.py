@@ -192,11 +192,24 @@ def check_against_problem(config: ReplanScenario, source: Path) -> Any:
 
 def run_replan(config: ReplanScenario, source: Path, seed: int | None = None) -> ReplanResult:
     """Run a ``kind: replan`` scenario (see module docstring)."""
-    from ...ocp.replan import Disturbance, replan_monte_carlo
+    from ...ocp.replan import PlanFailed
 
     problem = check_against_problem(config, source)
     d = config.disturbance
-    r = replan_monte_carlo(
+    try:
+        r = _monte_carlo(problem, config, d, seed)
+    except PlanFailed as failure:  # nothing flown: the plan solved so far is kept, as `mobisense solve` keeps it
+        return FailedPlanResult(failure.what, failure.solution)
+    flights = r.pop("flights")
+    summary = {"kind": "replan", "problem": problem.name, **r}
+    return ReplanResult(_dataset(problem, flights), summary)
+
+
+def _monte_carlo(problem: Any, config: ReplanScenario, d: DisturbanceOptions, seed: int | None) -> dict[str, Any]:
+    """:func:`mobisense.ocp.replan.replan_monte_carlo` with the file's settings."""
+    from ...ocp.replan import Disturbance, replan_monte_carlo
+
+    return replan_monte_carlo(
         problem,
         Disturbance(tuple(d.drift), d.force_noise_std),  # type: ignore[arg-type]
         runs=config.monte_carlo.runs,
@@ -206,9 +219,35 @@ def run_replan(config: ReplanScenario, source: Path, seed: int | None = None) ->
         length=config.replan.length,
         warm_start=config.replan.warm_start,
     )
-    flights = r.pop("flights")
-    summary = {"kind": "replan", "problem": problem.name, **r}
-    return ReplanResult(_dataset(problem, flights), summary)
+
+
+class FailedPlanResult(SimulationResult):
+    """A re-planning file whose starting plan failed: nothing flown, the failed solve kept.
+
+    :meth:`save` writes that solve's ``solution.nc`` and ``summary.json`` (Ipopt's status and what was solved, as
+    ``mobisense solve`` writes them); ``summary["status"]`` makes the command exit 1 after saving.
+    """
+
+    kind = "replan"
+
+    def __init__(self, what: str, solution: Any) -> None:
+        super().__init__(None, {"kind": "replan", "problem": solution.problem.name,
+                                "status": f"{what} failed, nothing was flown: {solution.message}"})  # fmt: skip
+        self.solution = solution
+
+    def non_finite(self) -> str | None:
+        """Nothing was flown: nothing to be finite."""
+        return None
+
+    def save(self, folder: str | Path, figures: bool = True) -> list[Path]:
+        """The failed solve's ``solution.nc`` and ``summary.json`` (no figures: there is no flight to draw)."""
+        folder = Path(folder)
+        self.solution.save(folder)
+        return [folder / "solution.nc", folder / "summary.json"]
+
+    def report(self, folder: Path) -> None:
+        """Where the failed plan was written."""
+        print(f"the failed plan (what was solved) in {folder}/: solution.nc, summary.json")
 
 
 def _unconverged(s: dict[str, Any]) -> str:

@@ -132,3 +132,24 @@ def test_a_negative_disturbance_seed_exits_2_naming_it(tmp_path, capsys) -> None
     assert cli.main(["replay", str(path), "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "disturbance.seed" in err and len(err.strip().splitlines()) == 2 and not out.exists()  # one per command
+
+
+def test_a_replan_whose_first_plan_fails_keeps_that_solve_and_exits_1(tmp_path, capsys) -> None:
+    # red team: with solver.max_iterations: 1 the full-horizon plan failed and replay exited 1 writing nothing;
+    # `mobisense solve` of the same problem keeps its solve (solution.nc, summary.json with Ipopt's status)
+    path = _files(tmp_path)
+    problem_file = tmp_path / yaml.safe_load(path.read_text())["problem"]
+    data = yaml.safe_load(problem_file.read_text())
+    data["solver"]["max_iterations"] = 1
+    data["solver"]["strategy"] = "cold"
+    problem_file.write_text(yaml.safe_dump(data))
+    out = tmp_path / "out"
+    assert cli.main(["replay", str(path), "--out", str(out), "--no-plot"]) == 1
+    err = capsys.readouterr().err
+    assert "the full-horizon plan failed, nothing was flown" in err and "Maximum_Iterations_Exceeded" in err
+    assert sorted(p.name for p in out.iterdir()) == ["solution.nc", "summary.json"]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "failed" and "Maximum_Iterations_Exceeded" in summary["message"]
+    from mobisense.ocp.solution import Solution
+
+    assert Solution.load(out).problem.solver.max_iterations == 1  # the failed solve, readable as any solution
