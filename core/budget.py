@@ -15,6 +15,7 @@ costs measured on a fast core), so only work that certainly takes longer is refu
 from __future__ import annotations
 
 import argparse
+import numbers
 import os
 import re
 import resource
@@ -31,6 +32,9 @@ __all__ = [
     "format_duration",
     "add_budget_argument",
     "check_budget",
+    "check_limits",
+    "MEMORY_LIMITS",
+    "TIME_LIMITS",
     "default_memory_limit",
     "format_bytes",
     "parse_size",
@@ -40,6 +44,9 @@ __all__ = [
 PROCESS_BYTES = 300 * 2**20
 #: default of ``--max-time``: work estimated to take longer is refused unless asked for
 DEFAULT_MAX_SECONDS = 3600.0
+#: the memory limits (bytes) and time limits (s) a budget takes: ``--max-memory`` 1M … 1E, ``--max-time`` 1s … 1000d
+MEMORY_LIMITS = (2**20, 2**60)
+TIME_LIMITS = (1.0, 1e8)
 _UNITS = {"": 1, "B": 1, "K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}
 
 
@@ -71,7 +78,7 @@ def parse_size(text: str) -> int:
     if match is None:
         raise ValueError(f"expected a size such as 4G, 512M or 2.5GiB, got {text[:40]!r}")
     value = float(match.group(1)) * _UNITS[match.group(2).upper()]
-    if not 2**20 <= value <= 2**60:
+    if not MEMORY_LIMITS[0] <= value <= MEMORY_LIMITS[1]:
         raise ValueError(f"expected a size between 1M and 1E, got {text[:40]!r}")
     return int(value)
 
@@ -82,7 +89,7 @@ def parse_duration(text: str) -> float:
     if match is None:
         raise ValueError(f"expected a duration such as 90s, 30m or 2h, got {text[:40]!r}")
     value = float(match.group(1)) * {"": 1, "s": 1, "m": 60, "h": 3600, "d": 86400}[match.group(2)]
-    if not 1 <= value <= 1e8:
+    if not TIME_LIMITS[0] <= value <= TIME_LIMITS[1]:
         raise ValueError(f"expected a duration between 1s and 1000d, got {text[:40]!r}")
     return value
 
@@ -178,6 +185,35 @@ def add_budget_argument(parser: argparse.ArgumentParser, time_limit: str | None 
         help="refuse to start when a lower bound of the computing time exceeds DURATION (e.g. 6h; default 1h); "
         + ("not a time limit once started" if time_limit is None else f"not a time limit: {time_limit} stops Ipopt"),
     )
+
+
+def check_limits(max_memory: int | None, max_time: float | None, caller: str) -> None:
+    """Refuse the limits ``--max-memory`` and ``--max-time`` would refuse, given to ``caller`` in Python.
+
+    Parameters
+    ----------
+    max_memory : int, optional
+        Bytes, in :data:`MEMORY_LIMITS` (None: the default).
+    max_time : float, optional
+        Seconds, in :data:`TIME_LIMITS` (None: the default).
+    caller : str
+        The function taking them, for the message.
+
+    Raises
+    ------
+    TypeError
+        A limit that is not a number.
+    ConfigError
+        A limit outside its range (NaN included): ``run_sweep: max_time: expected seconds in 1 … 1e8, got -1``.
+    """
+    for name, value, (low, high), what in (("max_memory", max_memory, MEMORY_LIMITS, "bytes in 1 MiB … 1 EiB"),
+                                           ("max_time", max_time, TIME_LIMITS, "seconds in 1 … 1e8")):  # fmt: skip
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            raise TypeError(f"{caller}: {name}: expected a number of {what}, got {type(value).__name__}")
+        if not low <= value <= high:
+            raise ConfigError(f"{caller}: {name}: expected {what}, got {value:g}")
 
 
 def check_budget(

@@ -35,12 +35,16 @@ __all__ = [
     "label_coordinate",
     "prepare",
     "open_dataset",
+    "check_signature",
+    "SIGNATURES",
     "cf_problems",
 ]
 
 CONVENTIONS = "CF-1.10"
 #: suffix of the auxiliary coordinate that carries the string labels of a dimension in the file
 LABEL_SUFFIX = "_label"
+#: the first bytes of a netCDF-4 (HDF5) file and of a classic netCDF file
+SIGNATURES = (b"\x89HDF\r\n\x1a\n", b"CDF")
 
 _command: list[str] = []
 
@@ -109,12 +113,39 @@ def prepare(dataset: Any) -> tuple[Any, dict[str, dict[str, Any]]]:
     return ds, encoding
 
 
+def check_signature(path: str | Path) -> bytes:
+    """The first 8 bytes of ``path``; ``ValueError`` unless they begin a netCDF-4 (HDF5) or classic netCDF file."""
+    with open(path, "rb") as f:
+        magic = f.read(8)
+    if not magic.startswith(SIGNATURES):
+        raise ValueError("neither HDF5 nor netCDF data")
+    return magic
+
+
 def open_dataset(path: str | Path) -> Any:
-    """Read a file written by mobisense, restoring string labels as index coordinates (loaded into memory)."""
+    """Read a file written by mobisense, restoring string labels as index coordinates (loaded into memory).
+
+    Raises
+    ------
+    FileNotFoundError
+        No file at ``path``.
+    ConfigError
+        ``path`` is not a netCDF file xarray can read (``FILE: expected a netCDF file written by mobisense …``).
+    """
     import xarray as xr
 
-    with xr.open_dataset(path, engine="h5netcdf") as ds:
-        ds = ds.load()
+    from .errors import ConfigError, one_line
+
+    try:
+        check_signature(path)
+        with xr.open_dataset(path, engine="h5netcdf") as ds:
+            ds = ds.load()
+    except FileNotFoundError:
+        raise
+    except (OSError, ValueError, TypeError, KeyError, RuntimeError) as exc:
+        reason = one_line(f"{type(exc).__name__}: {exc}", 120)
+        raise ConfigError(f"{path}: expected a netCDF file written by mobisense (solution.nc, result.nc, …), got "
+                          f"one it cannot read ({reason})") from None  # fmt: skip
     for name in [str(n) for n in ds.coords if str(n).endswith(LABEL_SUFFIX)]:
         dim = name[: -len(LABEL_SUFFIX)]
         if ds[name].dims == (dim,):

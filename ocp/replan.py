@@ -13,14 +13,18 @@ cost is ``Tr[M Σ(tf)] + ∫ (α/2|u|² + Tr[KΣ]) dt``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..core.config import parse_config
 from .model import SensorKalmanModel, Structure
 from .path_constraints import margins
 from .problem import Problem
+from .replan_inputs import DisturbanceArguments, check_replan_arguments
 from .replan_window import Replanner, ReplanRecord
+from .solving import as_problem
 
 __all__ = [
     "Disturbance",
@@ -36,10 +40,20 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Disturbance:
-    """A constant current ``drift`` (L/T, shape (2,)) and white force noise, ``force_noise_std`` per axis (L/T^1.5)."""
+    """A constant current ``drift`` (L/T, shape (2,)) and white force noise, ``force_noise_std`` per axis (L/T^1.5).
+
+    Raises ``ConfigError`` (``Disturbance: drift[0]: expected a finite number, got nan``) for a current that is not
+    two finite numbers or a noise level that is not a finite number ≥ 0.
+    """
 
     drift: tuple[float, float] = (0.0, 0.0)
     force_noise_std: float = 0.0
+
+    def __post_init__(self) -> None:
+        data = {"drift": self.drift, "force_noise_std": self.force_noise_std}
+        checked = parse_config(data, DisturbanceArguments, source="Disturbance")
+        object.__setattr__(self, "drift", tuple(checked.drift))
+        object.__setattr__(self, "force_noise_std", checked.force_noise_std)
 
 
 @dataclass
@@ -240,7 +254,7 @@ class PlanFailed(RuntimeError):
 
 
 def replan_monte_carlo(
-    problem: Problem,
+    problem: Problem | str | Path,
     disturbance: Disturbance,
     runs: int,
     every: float,
@@ -249,17 +263,25 @@ def replan_monte_carlo(
     length: float | None = None,
     warm_start: str = "shifted",
     progress: Any = None,
+    *,
+    max_memory: int | None = None,
+    max_time: float | None = None,
 ) -> dict[str, Any]:
     """Closed loop vs open loop vs no control over ``runs`` flights with the same noise draws.
 
     Parameters
     ----------
+    problem : Problem, str or Path
+        The problem, or the path of its YAML file (or a shipped example's name).
     length : float, optional
-        Receding-horizon length L (T); None: shrinking horizon.
+        Receding-horizon length L (T), ``every ≤ length ≤ tf − t0``; None: shrinking horizon.
     warm_start : {"shifted", "reused", "cold"}
         How each re-solve starts (:mod:`mobisense.ocp.replan_window`).
     progress : callable, optional
         Called with the number of runs done after each run.
+    max_memory, max_time : float, optional
+        The budget checked before anything runs (bytes, default half of the RAM; seconds of a lower estimate of
+        the computing time, default one hour), as ``mobisense replay``'s ``--max-memory`` and ``--max-time``.
 
     Returns
     -------
@@ -274,7 +296,18 @@ def replan_monte_carlo(
 
     The open loop flies the full-horizon plan whatever the horizon of the closed loop: it is what would be
     flown without re-planning, and for a receding horizon the benchmark the windows are measured against.
+
+    Raises ``TypeError`` for a ``problem`` or ``disturbance`` of another type, ``ConfigError`` for arguments
+    outside the rules of a ``kind: replan`` file (:mod:`mobisense.ocp.replan_inputs`) or work beyond the
+    budget, before anything is solved or allocated.
     """
+    problem = as_problem(problem, "replan_monte_carlo")
+    if not isinstance(disturbance, Disturbance):
+        raise TypeError(f"replan_monte_carlo: disturbance: expected a Disturbance, got {type(disturbance).__name__}")
+    if progress is not None and not callable(progress):
+        raise TypeError(f"replan_monte_carlo: progress: expected a callable, got {type(progress).__name__}")
+    check_replan_arguments(problem, PLAN_SAMPLES, (max_memory, max_time), runs=runs, every=every,
+                           time_step=time_step, seed=seed, length=length, warm_start=warm_start)  # fmt: skip
     replanner = Replanner(problem, length, warm_start)  # type: ignore[arg-type]
     h = problem.horizon
     build_time = replanner.prepare(np.arange(h.t0 + every, h.tf - 2 * time_step, every))

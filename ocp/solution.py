@@ -346,14 +346,22 @@ class Solution:
         Parameters
         ----------
         t : float or ndarray, shape (T,)
-            Times (T) in [t0, tf].
+            Times (T) in [t0, tf]: ``TypeError`` for values that are not numbers, ``ValueError`` for another
+            shape, NaN or a time outside.
 
         Returns
         -------
         TrajectorySample
             ``t`` (T,), ``Sigma`` (T, n, n), ``p`` and ``v`` (T, N, 2), ``u`` (T, N, 2).
         """
-        times = np.atleast_1d(np.asarray(t, dtype=float))
+        given = np.asarray(t)
+        if given.dtype.kind not in "iuf":
+            raise TypeError(f"t: expected a time or a 1-D array of times (numbers), got {brief(t)}")
+        times = np.atleast_1d(given.astype(float))
+        if times.ndim != 1:
+            raise ValueError(f"t: expected a time or a 1-D array of times, got an array of shape {times.shape}")
+        if not np.all(np.isfinite(times)):
+            raise ValueError(f"t: expected finite times, got {brief(times[~np.isfinite(times)][0])}")
         t0, tf = float(self.t[0]), float(self.t[-1])
         tol = 1e-12 * abs(tf - t0) + 8 * np.finfo(float).eps * max(abs(t0), abs(tf))
         if times.size and (times.min() < t0 - tol or times.max() > tf + tol):

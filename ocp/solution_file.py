@@ -39,6 +39,7 @@ def open_solution_file(path: str | Path, task: int | None = None) -> Iterator[tu
     import xarray as xr
 
     from ..core.budget import default_memory_limit, format_bytes
+    from ..core.netcdf import check_signature
 
     path = Path(path)
     if path.is_dir():
@@ -49,10 +50,7 @@ def open_solution_file(path: str | Path, task: int | None = None) -> Iterator[tu
     if size > limit:
         raise ConfigError(f"{path}: {format_bytes(size)} is more than the memory budget allows to load")
     try:
-        with open(path, "rb") as f:
-            magic = f.read(8)
-        if not magic.startswith((b"\x89HDF\r\n\x1a\n", b"CDF")):
-            raise ValueError("neither HDF5 nor netCDF data")
+        magic = check_signature(path)
         declared = _declared_arrays(path) if magic.startswith(b"\x89HDF") else None
     except (OSError, ValueError, TypeError, KeyError, RuntimeError) as exc:
         raise ConfigError(f"{path}: not a netCDF solution written by mobisense solve ({brief_error(exc)})") from None

@@ -14,7 +14,7 @@ from .registries import METHODS
 from .solution import HomotopyStep, Solution
 from .solution_warnings import init_warning
 
-__all__ = ["solve"]
+__all__ = ["solve", "as_problem"]
 
 
 def solve(
@@ -48,13 +48,12 @@ def solve(
         ``status`` tells whether ε = 1 was reached; a failed solve keeps what was solved. A solution with
         NaN or infinite values is never ``solved``.
     """
-    if not isinstance(problem, (Problem, str, os.PathLike)):
-        got = "a mapping (Problem.from_dict validates one)" if isinstance(problem, Mapping) else type(problem).__name__
-        raise TypeError(f"solve: problem: expected a Problem, a YAML path or an example's name, got {got}")
     if init is not None and not isinstance(init, Solution):
         raise TypeError(f"solve: init: expected a Solution (of an earlier solve), got {type(init).__name__}")
-    if not isinstance(problem, Problem):
-        problem = load_problem(problem)
+    if progress is not None and not callable(progress):
+        raise TypeError(f"solve: progress: expected a callable (called with each HomotopyStep), got "
+                        f"{type(progress).__name__}")  # fmt: skip
+    problem = as_problem(problem, "solve")
     method = method or problem.solver.method
     if method not in METHODS:
         raise ConfigError(f"solver.method: {METHODS.unknown(method)}")
@@ -66,3 +65,27 @@ def solve(
     if init is not None and (unused := init_warning(solution)):
         warnings.warn(unused, UserWarning, stacklevel=2)
     return solution
+
+
+def as_problem(problem: Problem | str | Path, caller: str) -> Problem:
+    """``problem``, or the problem read from its YAML path or shipped example's name (:func:`load_problem`).
+
+    Parameters
+    ----------
+    problem : Problem, str or Path
+    caller : str
+        The function taking it, for the message (``"solve"``).
+
+    Raises
+    ------
+    TypeError
+        ``problem`` is none of these (a mapping: :meth:`Problem.from_dict` validates one).
+    ConfigError
+        The file is missing or invalid.
+    """
+    if isinstance(problem, Problem):
+        return problem
+    if not isinstance(problem, (str, os.PathLike)):
+        got = "a mapping (Problem.from_dict validates one)" if isinstance(problem, Mapping) else type(problem).__name__
+        raise TypeError(f"{caller}: problem: expected a Problem, a YAML path or an example's name, got {got}")
+    return load_problem(problem)

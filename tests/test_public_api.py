@@ -12,11 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from reference_problems import hussein2008
+from reference_problems import PROBLEMS, hussein2008
 from scipy.integrate import trapezoid
 
 import mobisense
-from mobisense import Problem, Solution, solve
+from mobisense import ConfigError, Problem, Solution, solve
 from mobisense.ocp import BVP_SOLVERS
 from mobisense.ocp.indirect import BVPSolver
 
@@ -68,6 +68,77 @@ def test_arguments_of_the_wrong_type_are_named(call, message):
     assert message in str(raised.value)
 
 
+@pytest.mark.parametrize(
+    "call,error,message",
+    [
+        (lambda: mobisense.multistart("no/such/problem.yaml", 1), ConfigError, "no/such/problem.yaml: file not found"),
+        (lambda: mobisense.multistart({"process": {}}, 1), TypeError, "multistart: problem: expected a Problem, a "
+                                                                      "YAML path or an example's name, got a mapping"),
+        (lambda: mobisense.multistart("hussein2008", 2, workers=0), ConfigError, "multistart: workers: expected an "
+                                                                                 "integer in 1 … 4096, got 0"),
+        (lambda: mobisense.multistart("hussein2008", 0), ConfigError, "multistart: starts: expected an integer in 1 "
+                                                                      "… 4096, got 0"),
+        (lambda: solve("hussein2008", progress=5), TypeError, "solve: progress: expected a callable (called with "
+                                                              "each HomotopyStep), got int"),
+        (lambda: mobisense.sweep(PROBLEMS / "sweep_hussein2008.yaml", "unused", max_time=-1), ConfigError,
+         "sweep: max_time: expected seconds in 1 … 1e8, got -1"),
+        (lambda: mobisense.sweep(PROBLEMS / "sweep_hussein2008.yaml", "unused", max_memory=0), ConfigError,
+         "sweep: max_memory: expected bytes in 1 MiB … 1 EiB, got 0"),
+        (lambda: mobisense.sweep(PROBLEMS / "sweep_hussein2008.yaml", "unused", workers=0), ConfigError,
+         "sweep: workers: expected an integer in 1 … 4096, got 0"),
+    ],
+    ids=["multistart-path", "multistart-mapping", "multistart-workers", "multistart-starts", "solve-progress",
+         "sweep-max-time", "sweep-max-memory", "sweep-workers"],
+)  # fmt: skip
+def test_arguments_out_of_range_are_refused_before_any_work(call, error, message):
+    # the rules of the command-line flags (--workers, --multistart, --max-time, --max-memory) and of solve's inputs
+    with pytest.raises(error) as raised:
+        call()
+    assert message in str(raised.value)
+
+
+def test_solve_direct_names_an_init_without_a_primal_dual_point():
+    from mobisense.ocp.direct.solver import solve_direct
+
+    problem = Problem.from_dict(hussein2008(collocation={"intervals": 10}))
+    with pytest.raises(ValueError, match=r"solve_direct: init: expected a Solution or its nlp point \(a dict with "
+                                         r"keys w, lam_w, lam_g, P, signature\), got a dict without w, "):
+        solve_direct(problem, init={})  # fmt: skip
+    with pytest.raises(TypeError, match="solve_direct: init: expected a Solution or its nlp point"):
+        solve_direct(problem, init=[1.0])
+
+
+@pytest.mark.parametrize("path", [PROBLEMS / "hussein2008.yaml", Path("/dev/zero")], ids=["yaml", "dev-zero"])
+def test_open_dataset_names_a_file_that_is_not_netcdf(path):
+    with pytest.raises(ConfigError, match=f"{path}: expected a netCDF file written by mobisense"):
+        mobisense.open_dataset(path)
+
+
+def _numpy_data(data):
+    """``data`` with every list of numbers a numpy array, other lists tuples and numbers numpy scalars."""
+    if isinstance(data, dict):
+        return {key: _numpy_data(value) for key, value in data.items()}
+    if isinstance(data, list):
+        numeric = data and all(isinstance(v, (int, float, list)) and not isinstance(v, bool) for v in data)
+        return np.array(data, dtype=float) if numeric else tuple(_numpy_data(v) for v in data)
+    if isinstance(data, bool) or not isinstance(data, (int, float)):
+        return data
+    return np.int64(data) if isinstance(data, int) else np.float64(data)
+
+
+def test_numpy_arrays_scalars_and_tuples_give_the_problem_lists_and_numbers_give():
+    problem = Problem.from_dict(hussein2008())
+    data = _numpy_data(problem.normalised())
+    assert isinstance(data["process"]["Q"], np.ndarray) and isinstance(data["sensors"], tuple)
+    from_numpy = Problem.from_dict(data)
+    assert from_numpy == problem and from_numpy.digest() == problem.digest()
+    assert Problem.from_dict(from_numpy.normalised()) == problem  # and round trips
+    assert type(from_numpy.solver.collocation.intervals) is int
+    data["process"]["Q"] = np.array([[np.nan]])  # non-finite values: refused as in a list
+    with pytest.raises(ConfigError, match=r"process\.Q\[0\]\[0\]: expected a finite number, got nan"):
+        Problem.from_dict(data)
+
+
 @pytest.fixture(scope="module")
 def solution() -> Solution:
     return solve(Problem.from_dict(hussein2008(collocation={"intervals": 40})))
@@ -94,6 +165,22 @@ def test_sample_reproduces_the_nodes_and_the_polynomials(solution):
     np.testing.assert_allclose(integrated, s.p[-1], rtol=0, atol=1e-5 * np.abs(solution.p).max())
     with pytest.raises(ValueError, match="expected times in"):
         solution.sample([solution.t[-1] + 1.0])
+
+
+@pytest.mark.parametrize(
+    "t,error,message",
+    [
+        (np.nan, ValueError, "t: expected finite times, got nan"),
+        ([0.0, np.inf], ValueError, "t: expected finite times, got inf"),
+        ("0", TypeError, "t: expected a time or a 1-D array of times (numbers), got '0'"),
+        (np.zeros((2, 2)), ValueError, "t: expected a time or a 1-D array of times, got an array of shape (2, 2)"),
+    ],
+    ids=["nan", "inf", "string", "2-D"],
+)
+def test_sample_refuses_times_that_are_not_a_vector_of_finite_numbers(solution, t, error, message):
+    with pytest.raises(error) as raised:
+        solution.sample(t)
+    assert message in str(raised.value)
 
 
 def test_solution_round_trips_through_netcdf_with_its_polynomials(solution, tmp_path):

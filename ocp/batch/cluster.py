@@ -14,11 +14,14 @@ from typing import Any
 
 from ...core.errors import ConfigError
 
-__all__ = ["CONNECT_TIMEOUT", "Cluster", "add_cluster_arguments", "insecure_warning", "positive_int"]
+__all__ = ["CONNECT_TIMEOUT", "MAX_COUNT", "Cluster", "add_cluster_arguments", "check_count", "insecure_warning",
+           "positive_int"]  # fmt: skip
 
 #: seconds to connect to a ``--scheduler`` before giving up (exit status 2)
 CONNECT_TIMEOUT = 10.0
 _LOOPBACK = ("localhost", "127.", "::1", "[::1]", "0.0.0.0")
+#: most local worker processes (``--workers``) and multi-start starts (``--multistart``)
+MAX_COUNT = 4096
 
 
 def positive_int(text: str) -> int:
@@ -29,9 +32,28 @@ def positive_int(text: str) -> int:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text[:40]!r}") from None
-    if not 1 <= value <= 4096:
-        raise argparse.ArgumentTypeError(f"expected an integer in 1 … 4096, got {value}")
+    if not 1 <= value <= MAX_COUNT:
+        raise argparse.ArgumentTypeError(f"expected an integer in 1 … {MAX_COUNT}, got {value}")
     return value
+
+
+def check_count(name: str, value: Any, caller: str) -> None:
+    """Refuse a number of workers or starts given in Python that :func:`positive_int` would refuse on the command line.
+
+    Raises
+    ------
+    TypeError
+        ``value`` is not an integer (``caller: name: expected an integer in 1 … 4096, got float``).
+    ConfigError
+        ``value`` is outside 1 … :data:`MAX_COUNT`.
+    """
+    import numbers
+
+    expected = f"expected an integer in 1 … {MAX_COUNT}"
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{caller}: {name}: {expected}, got {type(value).__name__}")
+    if not 1 <= value <= MAX_COUNT:
+        raise ConfigError(f"{caller}: {name}: {expected}, got {value}")
 
 
 def add_cluster_arguments(parser: Any, what: str) -> None:

@@ -7,10 +7,13 @@ feasible trajectory (:func:`mobisense.ocp.direct.guesses.random_guess` with seed
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from ..problem import Problem
 from ..solution import Solution
+from ..solving import as_problem
+from .cluster import check_count
 
 __all__ = ["distinct_optima", "solve_multistart"]
 
@@ -31,18 +34,28 @@ def distinct_optima(solutions: list[Solution], rtol: float = 1e-6) -> list[dict[
 
 
 def solve_multistart(
-    problem: Problem, starts: int, scheduler: str | None = None, workers: int | None = None, security: Any = None
+    problem: Problem | str | Path,
+    starts: int,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    security: Any = None,
 ) -> Solution:
     """Solve from ``starts`` initial guesses through the dask engine; return the best, with the optima found.
 
-    ``scheduler`` (with dask ``security``) or ``workers`` local processes (default one per core, at most
-    ``starts``) run the starts.
+    ``problem`` is what :func:`~mobisense.ocp.solving.solve` takes: a Problem, the path of its YAML file or a
+    shipped example's name. ``scheduler`` (with dask ``security``) or ``workers`` local processes (default one
+    per core, at most ``starts``) run the starts; ``starts`` and ``workers`` are integers in 1 … 4096, as
+    ``--multistart`` and ``--workers`` take.
 
     The returned solution's ``stats["multistart"]`` holds ``starts``, ``converged`` and ``optima``
     (one entry per distinct local optimum: cost, which starts reached it, final sensor positions).
     """
     from .engine import open_client, run_tasks
 
+    check_count("starts", starts, "multistart")
+    if workers is not None:
+        check_count("workers", workers, "multistart")
+    problem = as_problem(problem, "multistart")
     payloads = [{"problem": problem.normalised(), "guess_seed": None if k == 0 else k} for k in range(starts)]
     solutions: list[Solution | None] = [None] * starts
     errors: list[str] = []
@@ -53,8 +66,6 @@ def solve_multistart(
         else:
             errors.append(f"start {i}: {result['row'].get('error', '')}")
 
-    if starts < 1:
-        raise ValueError(f"starts: expected >= 1, got {starts}")
     import os
 
     local = None if scheduler else min(starts, workers or os.cpu_count() or 1)

@@ -82,7 +82,7 @@ def run_sweep(
         Address of a running dask scheduler (with dask ``security``); default a local cluster of ``workers``
         processes.
     workers : int, optional
-        Local worker processes (default one per core, at most one per task).
+        Local worker processes, 1 … 4096 (default one per core, at most one per task).
     warm_start : bool
         Solve the tasks in chains of neighbours, one per worker, each warm-started from its predecessor
         (:mod:`mobisense.ocp.batch.chains`); otherwise every task starts from the coasting solution.
@@ -93,14 +93,17 @@ def run_sweep(
     security : distributed.security.Security, optional
         TLS settings for ``scheduler``.
     max_memory : int, optional
-        Memory budget (bytes) checked before anything runs (default half of the RAM).
+        Memory budget (bytes, 1 MiB … 1 EiB) checked before anything runs (default half of the RAM).
     max_time : float, optional
-        Time budget (s) checked before anything runs (default one hour on the local workers).
+        Time budget (s, 1 … 1e8) checked before anything runs (default one hour on the local workers).
 
     Raises
     ------
+    TypeError
+        ``workers``, ``max_memory`` or ``max_time`` is not a number.
     ConfigError
-        The sweep file, its base problem or one of its tasks is invalid, the sweep is too large for the
+        ``workers``, ``max_memory`` or ``max_time`` is out of range; the sweep file, its base problem or one
+        of its tasks is invalid, the sweep is too large for the
         memory budget, ``out`` cannot be used or holds another sweep, or a results fragment is corrupt
         (nothing is run or written).
     """
@@ -108,13 +111,17 @@ def run_sweep(
 
     import pandas as pd
 
-    from ...core.budget import check_budget
+    from ...core.budget import check_budget, check_limits
     from ...core.errors import ConfigError
     from ...core.output import OutputFolder, input_files
+    from .cluster import check_count
     from .engine import open_client, refuse_in_a_worker_import, run_tasks
     from .results_store import ResultStore, check_manifest, value_kind, write_manifest
     from .sweep import sweep_digest, sweep_estimates, task_count
 
+    check_limits(max_memory, max_time, "sweep")
+    if workers is not None:
+        check_count("workers", workers, "sweep")
     if scheduler is None:
         refuse_in_a_worker_import()  # before the folder's lock, which the parent process holds
     path, source = Path(path), str(path)

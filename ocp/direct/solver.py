@@ -28,6 +28,8 @@ from .violations import worst_violation
 __all__ = ["solve_direct", "solve_starts"]
 
 
+#: the keys of a primal–dual point (:attr:`Solution.nlp`, an ``init`` given as a dict)
+NLP_KEYS = ("w", "lam_w", "lam_g", "P", "signature")
 #: largest scaled constraint violation of a failed solve not blamed on a constraint (Ipopt stopped for another
 #: reason, e.g. its iteration limit, with the dynamics and path constraints satisfied)
 FEASIBLE_VIOLATION = 1e-6
@@ -54,7 +56,8 @@ def solve_direct(
         A solved problem of the same structure and grid (e.g. a sweep neighbour), or its ``nlp`` point
         (dict with ``w, lam_w, lam_g, P, signature``): the primal–dual point,
         re-scaled to this problem, warm-starts ε = 1 directly; if Ipopt fails from there the usual
-        continuation from the coasting solution runs.
+        continuation from the coasting solution runs. ``TypeError`` for another type, ``ValueError`` for a
+        dict without those keys.
     guess : ndarray, shape (nw,), optional
         A scaled decision vector (see :meth:`DirectCollocation.pack`) to start a cold ε = 1 solve from,
         without continuation (multi-start).
@@ -67,6 +70,14 @@ def solve_direct(
     Solution
         ``status`` is ``"solved"`` when ε = 1 converged, else ``"failed"`` with what was solved.
     """
+    if init is not None and not isinstance(init, Solution):
+        if not isinstance(init, dict):
+            raise TypeError(f"solve_direct: init: expected a Solution or its nlp point (a dict), got "
+                            f"{type(init).__name__}")  # fmt: skip
+        missing = [key for key in NLP_KEYS if key not in init]
+        if missing:
+            raise ValueError(f"solve_direct: init: expected a Solution or its nlp point (a dict with keys "
+                             f"{', '.join(NLP_KEYS)}), got a dict without {', '.join(missing)}")  # fmt: skip
     t_start = time.perf_counter()
     tr = transcription or transcription_for(problem)
     ctx, coasting, order = _context(problem, tr, progress)

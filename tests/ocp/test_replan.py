@@ -8,6 +8,7 @@ import yaml
 from reference_problems import PROBLEMS
 from scipy.integrate import solve_ivp
 
+from mobisense.core.config import ConfigError
 from mobisense.ocp.problem import Problem
 from mobisense.ocp.replan import Disturbance, replan_monte_carlo
 from mobisense.ocp.replan_window import Replanner, cost_to_go_weight
@@ -17,6 +18,58 @@ def _problem() -> Problem:
     data = yaml.safe_load((PROBLEMS / "hussein2008.yaml").read_text())
     data["solver"]["collocation"]["intervals"] = 30
     return Problem.from_dict(data)
+
+
+@pytest.mark.parametrize(
+    "arguments,error,message",
+    [
+        ({"runs": 0}, ConfigError, "runs: expected greater than or equal to 1 (got 0)"),
+        ({"runs": 2.0}, ConfigError, "runs: expected a valid integer (got 2.0)"),
+        ({"every": -1.0}, ConfigError, "every: expected a number > 0, got -1.0"),
+        ({"every": float("nan")}, ConfigError, "every: expected a finite number, got nan"),
+        ({"time_step": 0.0}, ConfigError, "time_step: expected a number > 0, got 0.0"),
+        ({"time_step": -0.05}, ConfigError, "time_step: expected a number > 0, got -0.05"),
+        ({"time_step": float("nan")}, ConfigError, "time_step: expected a finite number, got nan"),
+        ({"every": 8.0, "time_step": 6.0}, ConfigError, "time_step: expected at most half the horizon (5), got 6"),
+        ({"time_step": 2.0}, ConfigError, "every: expected at least time_step = 2 (one re-plan per step at most), "
+                                          "got 1"),
+        ({"length": 100.0}, ConfigError, "length: expected a window within the horizon, ≤ tf − t0 = 10, got 100"),
+        ({"length": 0.1}, ConfigError, "every: expected every ≤ length = 0.1, got 1"),
+        ({"length": float("nan")}, ConfigError, "length: expected a finite number, got nan"),
+        ({"seed": -1}, ConfigError, "seed: expected greater than or equal to 0 (got -1)"),
+        ({"warm_start": "hot"}, ConfigError, "warm_start: expected 'shifted', 'reused' or 'cold'"),
+        ({"time_step": 1e-7}, ConfigError, "too long: 1 runs × 1e+08 steps"),
+        ({"runs": 100_000, "time_step": 1e-3}, ConfigError, "too large: 100000 runs × 1e+04 steps"),
+        ({"max_time": -1}, ConfigError, "max_time: expected seconds in 1 … 1e8, got -1"),
+        ({"progress": 5}, TypeError, "progress: expected a callable, got int"),
+        ({"disturbance": {"drift": (0.0, 0.0)}}, TypeError, "disturbance: expected a Disturbance, got dict"),
+        ({"problem": "no/such/problem.yaml"}, ConfigError, "no/such/problem.yaml: file not found"),
+        ({"problem": 3}, TypeError, "problem: expected a Problem, a YAML path or an example's name, got int"),
+    ],
+)  # fmt: skip
+def test_replan_monte_carlo_refuses_bad_arguments_before_any_work(arguments, error, message) -> None:
+    # the rules of a kind: replan file (and its budget), applied to the Python call: one line naming the argument
+    call = {"problem": _problem(), "disturbance": Disturbance((0.1, 0.0), 0.05), "runs": 1, "every": 1.0,
+            "time_step": 0.05, **arguments}  # fmt: skip
+    with pytest.raises(error) as raised:
+        replan_monte_carlo(**call)
+    assert message in str(raised.value)
+    assert str(raised.value).startswith("no/such" if "no/such" in message else "replan_monte_carlo: ")
+
+
+@pytest.mark.parametrize(
+    "arguments,message",
+    [
+        (((float("nan"), 0.0), 0.0), "Disturbance: drift[0]: expected a finite number, got nan"),
+        (((1.0, 0.0, 0.0), 0.0), "Disturbance: drift: expected at most 2 items, not 3"),
+        (((0.0, 0.0), -1.0), "Disturbance: force_noise_std: expected a number >= 0, got -1.0"),
+        (((0.0, 0.0), float("inf")), "Disturbance: force_noise_std: expected a finite number, got inf"),
+    ],
+)
+def test_a_disturbance_is_two_finite_current_components_and_a_noise_level_of_at_least_zero(arguments, message) -> None:
+    with pytest.raises(ConfigError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        Disturbance(*arguments)
+    assert Disturbance(np.array([0.3, -0.2]), np.float64(0.05)) == Disturbance((0.3, -0.2), 0.05)
 
 
 @pytest.mark.slow
