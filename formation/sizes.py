@@ -132,61 +132,17 @@ def _plan_replay(config: Any, source: Path) -> list[Estimate]:
     return parts + [Estimate(what, 8.0 * floats, hint, mc.runs * steps * n * 0.5e-6)]
 
 
-#: least time of one re-solve beyond its Ipopt iterations (s): the window's problem validated, the previous plan
-#: shifted onto its grid, Ipopt's fixed cost per call. The default problem's re-solves took 11–18 ms (median),
-#: which the non-zero term alone put at 0.4 ms: 40 000 re-solves passed --max-time 30s and ran 13 min (red team)
-SECONDS_PER_RESOLVE = 5e-3
-
-
 def _replan(config: Any, source: Path) -> list[Estimate]:
-    """Flights (3 policies × runs × steps), the plans kept (runs × re-plans × samples) and the re-solves.
-
-    One transcription per window length is held (up to one per re-plan); each warm re-solve takes ≥ 2
-    Ipopt iterations (3–5 measured) at the per-non-zero cost of :mod:`mobisense.ocp.sizes`, plus
-    :data:`SECONDS_PER_RESOLVE` for posing the window (its problem, the shifted point, the Ipopt call).
-    """
-    from ..ocp.direct.nlp_size import transcription_size
-    from ..ocp.field import FLOPS_PER_SECOND
-    from ..ocp.model import Structure
+    """Flights, plans kept and re-solves: :func:`mobisense.ocp.replan_inputs.replan_estimates`, the API's budget."""
     from ..ocp.replan import PLAN_SAMPLES
-    from ..ocp.sizes import SECONDS_PER_NONZERO_ITERATION, direct_estimate
+    from ..ocp.replan_inputs import replan_estimates
     from .replay.replan import check_against_problem
 
     problem = check_against_problem(config, source)
-    span, mc, every = problem.horizon.tf - problem.horizon.t0, config.monte_carlo, config.replan.every
-    steps = _steps(span, mc.time_step)
-    replans = min(int(math.ceil(span / every)), steps)
-    n, N, runs = problem.n, problem.N, mc.runs
-    floats = runs * (steps * (2 * N + n * n) + (replans + 1) * PLAN_SAMPLES * (2 * N + 1))
+    mc = config.monte_carlo
     hint = "use fewer monte_carlo.runs, a larger monte_carlo.time_step or a larger replan.every"
-    what = f"{runs} runs × {steps:.3g} steps × {replans} re-plans (horizon / time_step, horizon / every)"
-    flights = Estimate(what, _COPIES * 8.0 * floats, hint, 3 * runs * steps * (30e-6 + 4.0 * n**3 / FLOPS_PER_SECOND))
-    if problem.solver.method == "shooting":
-        return [flights, _field_resolves(problem, runs * replans, hint)]
-    c = problem.solver.collocation
-    size = transcription_size(Structure.of(problem), c.degree, c.intervals, c.scheme)
-    solve_seconds = SECONDS_PER_RESOLVE + 2 * (size.jacobian_nnz + size.hessian_nnz) * SECONDS_PER_NONZERO_ITERATION
-    held = direct_estimate(problem)
-    solves = Estimate(f"{runs * replans:.3g} re-solves of {held.what}", min(replans, c.intervals) * held.bytes,
-                      hint, held.seconds + runs * replans * solve_seconds)  # fmt: skip
-    return [flights, solves]
-
-
-def _field_resolves(problem: Any, resolves: int, hint: str) -> Estimate:
-    """A field's re-solves by shooting, one solve's memory at a time.
-
-    The full-horizon solve, then each window's fine ε = 1 solve: at least
-    :data:`~mobisense.ocp.field.FINE_ITERATIONS` iterations on the whole grid at one substep (a low bound:
-    windows shrink) plus :data:`SECONDS_PER_RESOLVE`.
-    """
-    from ..ocp.field import shooting_seconds
-    from ..ocp.sizes import shooting_estimate
-
-    whole = shooting_estimate(problem)
-    o = problem.solver.shooting
-    fine = shooting_seconds(problem.n, o.intervals, 1, problem.N)  # one substep per interval: windows' m may be less
-    return Estimate(f"{resolves:.3g} re-solves of {whole.what}", whole.bytes, hint + whole.hint.join(("; or ", "")),
-                    whole.seconds + resolves * (SECONDS_PER_RESOLVE + fine))  # fmt: skip
+    return replan_estimates(problem, mc.runs, config.replan.every, mc.time_step, PLAN_SAMPLES, hint,
+                            config.replan.length, config.replan.warm_start)  # fmt: skip
 
 
 def scenario_estimates(kind: str, config: Any, source: Path) -> list[Estimate]:

@@ -44,7 +44,7 @@ from ..core.config import (
     parse_config,
 )
 from ..core.units import LengthUnit, PhysicalUnit, TimeUnit, UnitSystem
-from .field import MAX_SUBSTEPS, FieldSpec, ShootingOptions, shooting_rate, shooting_substeps
+from .field import MAX_SUBSTEPS, FieldSpec, ShootingOptions, check_field_prior, shooting_rate, shooting_substeps
 from .noise_models import NoiseModel, parse_noise
 from .path_constraints import PathConstraints, check_initial_state, check_terminal_states
 from .reachability import check_reachable
@@ -118,13 +118,6 @@ class Horizon(StrictModel):
         return self
 
 
-#: the largest eigenvalue of a field's process.Sigma0, in units of its variance σ²: the measurement update
-#: Σ − ΣC'(CΣC' + r)⁻¹CΣ of a prior of size s ends O(σ²) with a rounding error of s·1e-16, so beyond 1e8 σ² it
-#: keeps fewer than 8 digits (1e20 σ²: CasADi's evaluation failed; 1e10–1e13 σ²: the shooting's J 0.8–49 % off
-#: its own re-integration on K = 10)
-FIELD_PRIOR_RATIO = 1e8
-
-
 class Process(StrictModel):
     """The process ``x' = A x + B w``, ``E[w w'] = Q``, its initial error covariance and locations.
 
@@ -149,13 +142,8 @@ class Process(StrictModel):
                 raise InvalidValue(explicit[0], "expected no explicit matrices with process.field (they are derived; "
                                    "only Sigma0 may replace Kₛ as the initial covariance)")  # fmt: skip
             if self.Sigma0 is not None:  # a prior map's covariance, or the filter's Σ at a re-plan instant
-                Sigma0 = check_spd("Sigma0", check_shape("Sigma0", self.Sigma0, (self.field.n, self.field.n)))
-                largest, ceiling = float(np.linalg.eigvalsh(Sigma0)[-1]), FIELD_PRIOR_RATIO * self.field.kernel.variance
-                if largest > ceiling:
-                    raise InvalidValue("Sigma0", f"expected variances at most {FIELD_PRIOR_RATIO:g} × the field's "
-                                       f"variance σ² = {self.field.kernel.variance:g} (a first measurement's update "
-                                       f"would cancel more than 8 of the 16 digits of the map's variance), got an "
-                                       f"eigenvalue {largest:.3g}")  # fmt: skip
+                check_field_prior(check_spd("Sigma0", check_shape("Sigma0", self.Sigma0, (self.field.n, self.field.n))),
+                                  self.field.kernel.variance)  # fmt: skip
             return self
         for key in ("A", "B", "Q", "Sigma0", "locations"):
             if getattr(self, key) is None:

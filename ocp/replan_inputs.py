@@ -100,26 +100,34 @@ def check_replan_arguments(
         raise ConfigError(f"{source}: time_step: expected at most half the horizon ({span / 2:g}), "
                           f"got {args.time_step:g}")  # fmt: skip
     hint = "use fewer runs, a larger time_step or a larger every"
-    estimates = replan_estimates(problem, args.runs, args.every, args.time_step, plan_samples, hint)
+    estimates = replan_estimates(problem, args.runs, args.every, args.time_step, plan_samples, hint, args.length,
+                                 args.warm_start)  # fmt: skip
     check_budget(estimates, limits[0], source, limits[1])
     return args
 
 
 def replan_estimates(
-    problem: Problem, runs: int, every: float, time_step: float, plan_samples: int, hint: str
-) -> list[Estimate]:
+    problem: Problem, runs: int, every: float, time_step: float, plan_samples: int, hint: str,
+    length: float | None = None, warm_start: str = "shifted",
+) -> list[Estimate]:  # fmt: skip
     """Flights (3 policies × runs × steps), the plans kept (runs × re-plans × samples) and the re-solves.
 
     One transcription per window length is held (up to one per re-plan); each warm re-solve takes ≥ 2
-    Ipopt iterations at the per-non-zero cost of :mod:`mobisense.ocp.sizes`, plus :data:`SECONDS_PER_RESOLVE`;
-    a field's re-solves by shooting hold one solve's memory at a time.
+    Ipopt iterations at the per-non-zero cost of :mod:`mobisense.ocp.sizes`, plus :data:`SECONDS_PER_RESOLVE`.
+    A field's re-solves by shooting hold one solve's memory at a time: each window's fine ε = 1 solve takes at
+    least :data:`~mobisense.ocp.field.FINE_ITERATIONS` iterations on the whole grid at one substep (a low bound:
+    windows shrink); a ``cold`` window runs the whole solve (coarse homotopy and random starts included) on its
+    share of the horizon, its grids scaled with it; with path constraints each costs
+    :data:`~mobisense.ocp.field.CONSTRAINED_FACTOR` times as much (the island re-planned cold every 0.5 T was
+    estimated at 23 s without the two and ran 286 s).
     """
     from .direct.nlp_size import transcription_size
-    from .field import FLOPS_PER_SECOND, shooting_seconds
+    from .field import CONSTRAINED_FACTOR, FLOPS_PER_SECOND, shooting_seconds
     from .model import Structure
     from .sizes import SECONDS_PER_NONZERO_ITERATION, direct_estimate, shooting_estimate
 
-    span = problem.horizon.tf - problem.horizon.t0
+    h = problem.horizon
+    span = h.tf - h.t0
     steps = int(math.ceil(span / time_step)) + 1
     replans = min(int(math.ceil(span / every)), steps)
     n, N = problem.n, problem.N
@@ -129,10 +137,18 @@ def replan_estimates(
     resolves = runs * replans
     if problem.solver.method == "shooting":
         whole = shooting_estimate(problem)
+        windows = [(t, h.tf if length is None else min(t + length, h.tf))
+                   for t in (h.t0 + k * every for k in range(1, replans)) if t < h.tf]  # fmt: skip
         fine = shooting_seconds(n, problem.solver.shooting.intervals, 1, N)
+        if problem.constraints is not None:
+            fine *= CONSTRAINED_FACTOR
+        if warm_start == "cold":  # the whole solve on each window's share of the horizon (grids scale with it)
+            per_run = whole.seconds * sum(end - t for t, end in windows) / span
+        else:
+            per_run = len(windows) * fine
         return [flights, Estimate(f"{resolves:.3g} re-solves of {whole.what}", whole.bytes,
                                   hint + whole.hint.join(("; or ", "")),
-                                  whole.seconds + resolves * (SECONDS_PER_RESOLVE + fine))]  # fmt: skip
+                                  whole.seconds + runs * per_run + resolves * SECONDS_PER_RESOLVE)]  # fmt: skip
     c = problem.solver.collocation
     size = transcription_size(Structure.of(problem), c.degree, c.intervals, c.scheme)
     solve_seconds = SECONDS_PER_RESOLVE + 2 * (size.jacobian_nnz + size.hessian_nnz) * SECONDS_PER_NONZERO_ITERATION

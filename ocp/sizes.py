@@ -89,6 +89,7 @@ def shooting_estimate(problem: Problem) -> Estimate:
     """Peak memory and least time of the reduced-space shooting method (:mod:`mobisense.ocp.field`)."""
     from .field import (
         COARSE_H_LAMBDA,
+        CONSTRAINED_FACTOR,
         START_ITERATIONS,
         STEP_ITERATIONS,
         shooting_memory_bytes,
@@ -114,6 +115,8 @@ def shooting_estimate(problem: Problem) -> Estimate:
     coarse_iterations = STEP_ITERATIONS * len(o.homotopy) + START_ITERATIONS * o.starts
     seconds = shooting_seconds(n, o.intervals, m, N) + shooting_seconds(n, o.coarse_intervals, m_coarse, N,
                                                                          coarse_iterations)  # fmt: skip
+    if problem.constraints is not None:
+        seconds *= CONSTRAINED_FACTOR
     if o.starts:
         hint += "; fewer random starts (solver.shooting.starts)"
     return Estimate(what, shooting_memory_bytes(n, o.intervals, m, N), hint, seconds)

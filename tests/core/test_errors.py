@@ -48,7 +48,8 @@ def test_a_field_prior_far_above_the_fields_variance_is_refused_with_its_key() -
     # red team: process.Sigma0 = 1e20·I on a 3 × 3 field of σ² = 1 ended in CasADi's "Evaluation failed" (exit 1)
     from short_runs import field_problem
 
-    from mobisense.ocp.problem import FIELD_PRIOR_RATIO, Problem
+    from mobisense.ocp.field import FIELD_PRIOR_RATIO
+    from mobisense.ocp.problem import Problem
 
     data = field_problem(grid=(3, 3))
     data["process"]["Sigma0"] = (FIELD_PRIOR_RATIO * 1.01 * np.eye(9)).tolist()
