@@ -213,3 +213,25 @@ def test_a_sweep_over_large_field_grids_is_budgeted_without_building_the_fields(
     tracemalloc.stop()
     assert len(tasks) == 4 and max(e.bytes for e in estimates) > 100 * 2**30  # refused by any machine's budget
     assert seconds < 2.0 and peak < 20e6  # one 2500 × 2500 kernel matrix alone is 50 MB
+
+
+def test_a_task_of_its_own_structure_counts_a_whole_cold_solve_in_the_sweeps_time(tmp_path) -> None:
+    # red team: vary solver.method over a 3 × 3 field: every task counted at a fifth of a cold solve, so the sweep
+    # passed --max-time 10s and ran 4 min 52 s; its direct task, alone ≥ 50 s, has no neighbour to start warm from
+    from short_runs import field_problem
+
+    from mobisense.ocp.batch.sweep import WARM_SHARE, expand_sweep, load_sweep, sweep_estimates
+    from mobisense.ocp.sizes import problem_estimates
+
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump(field_problem(grid=(3, 3), shooting={"intervals": 10})))
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump({"base": "base.yaml", "vary": {"solver.method": ["shooting", "direct"],
+                                                                  "cost.alpha": [0.05, 0.06, 0.07]}}))  # fmt: skip
+    spec, base = load_sweep(path)
+    tasks = expand_sweep(spec, base, str(path))
+    seconds = sweep_estimates(spec, base, 1, str(path), tasks)[-1].seconds
+    alone = {method: sum(e.seconds for e in problem_estimates(base.with_solver(method=method)))
+             for method in ("shooting", "direct")}  # fmt: skip
+    # each method's first task cold, its two others warm: the sum, on one worker
+    assert seconds == pytest.approx(sum(alone.values()) * (1 + 2 * WARM_SHARE), rel=1e-9)
+    assert seconds > alone["direct"] > 10.0
