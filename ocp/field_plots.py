@@ -45,16 +45,21 @@ def plot_variance_maps(solution: Solution):  # noqa: ANN201  (matplotlib Figure)
     fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), height), layout="constrained",
                              squeeze=False, sharex=True, sharey=True)  # fmt: skip
     length, variance = _label(solution, length=1), _label(solution, state=2)
+    from matplotlib import patheffects
+
+    outline = [patheffects.withStroke(linewidth=3.2, foreground="k")]  # white paths stay visible off the grid too
     for ax, (title, values, paths) in zip(axes[0], panels, strict=True):
+        ax.set_facecolor("0.85")  # outside the grid: no map there
         mesh = ax.pcolormesh(xe, ye, field.to_grid(values), vmin=0.0, vmax=vmax, cmap="viridis", shading="flat")
         ax.plot(*field.locations.T, "k.", ms=2, alpha=0.5)
         draw_constraints(ax, solution.problem.constraints)
         for i, sensor in enumerate(solution.problem.sensors):
             ax.plot(p[0, i, 0], p[0, i, 1], "wo", ms=5, mec="k", zorder=3)
             if paths:
-                ax.plot(p[:, i, 0], p[:, i, 1], "w-", lw=1.6, zorder=2)
+                ax.plot(p[:, i, 0], p[:, i, 1], "w-", lw=1.6, zorder=2, path_effects=outline)
                 ax.plot(p[-1, i, 0], p[-1, i, 1], "w^", ms=7, mec="k", zorder=3)
-                ax.annotate(sensor.name, p[-1, i], color="w", fontsize=8, xytext=(4, 4), textcoords="offset points")
+                ax.annotate(sensor.name, p[-1, i], color="w", fontsize=8, xytext=(4, 4), textcoords="offset points",
+                            path_effects=outline)  # fmt: skip
         ax.set(title=f"{title}\nTr Σ = {values.sum():.4g} {variance}", xlabel=f"x ({length})",
                ylabel=f"y ({length})", xlim=xlim, ylim=ylim, aspect="equal")  # fmt: skip
     fig.colorbar(mesh, ax=axes[0].tolist(), label=f"error variance diag Σ ({variance})")

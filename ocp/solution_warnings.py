@@ -10,8 +10,9 @@ from typing import Any
 
 from .solve_outcome import StartKind
 
-__all__ = ["PLAN_TOLERANCE", "PATH_TOLERANCE", "solution_warnings", "unresolved_plan_cost", "plan_warning",
-           "constraint_warning", "strategy_warning", "init_warning"]  # fmt: skip
+__all__ = ["PLAN_TOLERANCE", "PATH_TOLERANCE", "UNRESOLVED_FIELD", "field_grid_warning", "solution_warnings",
+           "unresolved_plan_cost", "plan_warning", "constraint_warning", "strategy_warning",
+           "init_warning"]  # fmt: skip
 
 #: relative difference of the optimiser's J from its plan re-integrated (``stats["plan_check"]``) above which the
 #: grid is reported as not resolving the plan (the discretisation error of a resolved grid is far smaller:
@@ -30,7 +31,7 @@ def solution_warnings(solution: Any, smallest: float, init: bool = True) -> list
     the user gave went unused).
     """
     candidates = (plan_warning(solution), constraint_warning(solution), strategy_warning(solution),
-                  init_warning(solution) if init else None)  # fmt: skip
+                  init_warning(solution) if init else None, field_grid_warning(solution))  # fmt: skip
     warnings = [w for w in candidates if w]
     if smallest <= 0:  # a covariance that is not one: the grid or the solve did not follow the Riccati flow
         warnings.append(f"Σ(t) is not positive definite (smallest eigenvalue {smallest:.3g}): not a Kalman "
@@ -44,6 +45,31 @@ def solution_warnings(solution: Any, smallest: float, init: bool = True) -> list
             f"J = {solution.baseline['cost']:.6g}): {why}"
         )
     return warnings
+
+
+#: mean kriging residual variance inside a cell (fraction of σ²) beyond which a field's grid is reported as not
+#: resolving the field: a spacing of about 1.2 ℓ (Matérn-3/2); field_mapping_5x5.yaml (2ℓ/3) leaves 0.05
+UNRESOLVED_FIELD = 0.25
+
+
+def field_grid_warning(solution: Any) -> str | None:
+    """That a field's grid is too coarse for its length scale (:meth:`FieldSpec.unresolved_fraction`), or None.
+
+    The filter's state is the field at the nodes: with ℓ = 0.3 on a spacing of 2 the plan parked a sensor on a node
+    and J counted that node as known, while the cell around it kept 95 % of its prior variance (field audit).
+    """
+    spec = solution.problem.process.field
+    if spec is None:
+        return None
+    fraction = spec.unresolved_fraction()
+    if fraction <= UNRESOLVED_FIELD:
+        return None
+    (nx, ny), ((x0, x1), (y0, y1)) = spec.grid, spec.extent
+    spacing = max((x1 - x0) / nx, (y1 - y0) / ny)
+    return (f"the field's grid does not resolve it: cells of {spacing:.3g} for a length scale of "
+            f"{spec.kernel.length_scale:.3g} leave {100 * fraction:.0f} % of the field's variance unknown between the "
+            "nodes whatever the sensors do, and J, the plan and the maps describe the nodes only (docs/theory/field.md "
+            "§1); use a finer process.field.grid (a spacing of at most ℓ/3 leaves about 1 %)")
 
 
 def constraint_warning(solution: Any) -> str | None:

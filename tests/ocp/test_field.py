@@ -656,3 +656,37 @@ def test_the_time_estimate_counts_the_substeps_a_running_cost_takes():
                 + shooting_seconds(n, o.coarse_intervals, coarse.m, N, steps)
                 - shooting_seconds(n, o.coarse_intervals, 1, N, steps))  # fmt: skip
     assert coarse.m == 4 and mean.seconds - zero.seconds == pytest.approx(expected, rel=1e-12)
+
+
+def test_a_grid_far_coarser_than_the_length_scale_is_reported_with_the_variance_it_leaves_between_nodes():
+    # field audit: ℓ = 0.3 on a spacing of 2 solved without a word; a hand plan beat the "optimum" by 8 % and the map
+    # painted a cell at its node's 0.095 where the model's own mean variance over the cell was 0.95
+    from mobisense.ocp.field import FieldSpec
+    from mobisense.ocp.solution_warnings import UNRESOLVED_FIELD, field_grid_warning
+
+    def spec(ell: float, grid: int) -> FieldSpec:
+        return FieldSpec.model_validate({"grid": [grid, grid], "extent": [[0, 10], [0, 10]], "time_constant": 20.0,
+                                         "kernel": {"type": "matern32", "length_scale": ell, "variance": 2.0}})
+
+    # independent check of the fraction on the whole 5 × 5 grid (its central cell, every node, numpy only):
+    # σ² − k'Kₛ⁻¹k averaged over a 9 × 9 lattice of the cell, in units of σ²
+    s = spec(3.0, 5)
+    loc = s.locations()
+    kern = lambda r: 2.0 * (1 + np.sqrt(3) * r / 3.0) * np.exp(-np.sqrt(3) * r / 3.0)  # noqa: E731
+    Ks = kern(np.linalg.norm(loc[:, None] - loc[None], axis=-1)) + 1e-8 * 2.0 * np.eye(25)
+    g = np.linspace(4.0, 6.0, 9)
+    pts = np.array([[x, y] for x in g for y in g])
+    k = kern(np.linalg.norm(pts[:, None] - loc[None], axis=-1))
+    independent = np.mean(2.0 - np.einsum("ij,ij->i", k @ np.linalg.inv(Ks), k)) / 2.0
+    # the block of 5 × 5 is the whole grid here: the same numbers, to the smoothing δ = 1e-6 ℓ (1e-9 relative)
+    assert s.unresolved_fraction() == pytest.approx(independent, rel=1e-6)
+    assert spec(3.0, 10).unresolved_fraction() < 0.01 < spec(3.0, 5).unresolved_fraction() < UNRESOLVED_FIELD
+    assert spec(0.3, 5).unresolved_fraction() > 0.9
+
+    class Solved:  # what the warning reads of a solution
+        problem = ms.Problem.from_dict(field_problem())
+
+    Solved.problem.process.field = spec(0.3, 5)
+    assert "leave 96 % of the field's variance unknown between the nodes" in field_grid_warning(Solved)
+    Solved.problem.process.field = spec(3.0, 5)
+    assert field_grid_warning(Solved) is None
