@@ -358,8 +358,31 @@ def _describe(error: dict[str, Any], model: type[BaseModel], suggestion_for: dic
             noun = "character" if isinstance(got, str) else "item"
             most = "at most" if kind == "too_long" else "at least"
             message = f"expected {most} {bound} {noun}{'s' if bound != 1 else ''}, not {len(got)}"
-    got_text = "" if kind.startswith("value_error") or isinstance(got, dict) else f" ({_got(got)})"
+    if kind.startswith("value_error") or (isinstance(got, dict) and kind in ("model_type", "dict_type")):
+        got_text = ""
+    else:
+        got_text = " (got a mapping)" if isinstance(got, dict) else f" ({_got(got)})"
     return f"{path}: {message}{got_text}"
+
+
+def _alternatives(messages: list[str]) -> str:
+    """One message from those of a union's branches at one key path.
+
+    ``cost.M: expected a valid list (got the string 'median')`` and ``cost.M: expected 'mean', 'sum' or 'zero'
+    (got …)`` become ``cost.M: expected a valid list, or 'mean', 'sum' or 'zero' (got the string 'median')``.
+    """
+    if len(messages) == 1:
+        return messages[0]
+    path, _, _ = messages[0].partition(": ")
+    expected, got = [], ""
+    for message in messages:
+        body = message.partition(": ")[2]
+        if " (got " in body and body.endswith(")"):
+            body, got = body[: body.rindex(" (got ")], body[body.rindex(" (got ") :]
+        body = body.removeprefix("expected ")
+        if body not in expected:
+            expected.append(body)
+    return f"{path}: expected {', or '.join(expected)}{got}"
 
 
 def _misspellings(errors: list[dict[str, Any]], model: type[BaseModel]) -> dict[tuple, str]:
@@ -449,8 +472,11 @@ def parse_config(data: Any, model: type[T], source: str = "<dict>") -> T:
         shown = [e for e in errors if not (e["type"] == "missing" and tuple(_key_parts(tuple(e["loc"]), model))
                                            in explained)]  # fmt: skip
         shown.sort(key=rank)
-        first = _describe(shown[0], model, misspelled)
-        rest = len(shown) - 1
+        places = [tuple(_key_parts(tuple(e["loc"]), model)) for e in shown]
+        # the branches of a union (a matrix or a name) fail at one key path: one message with every alternative
+        first = _alternatives([_describe(e, model, misspelled) for e, at in zip(shown, places, strict=True)
+                               if at == places[0]])  # fmt: skip
+        rest = len(set(places)) - 1
         more = f" (and {rest} more problem{'s' if rest > 1 else ''})" if rest else ""
         raise ConfigError(f"{source}: {first}{more}") from None
     except RecursionError:

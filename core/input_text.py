@@ -36,6 +36,18 @@ _BOMS = (  # longest first: the UTF-32-LE BOM starts with the UTF-16-LE one
 )
 
 
+def missing_file(path: str | Path) -> str:
+    """Why ``path`` is not a regular file to read: ``"file not found"``, a broken link, a folder, a device or pipe."""
+    path = Path(path)
+    if path.is_symlink() and not path.exists():
+        return "broken symbolic link"
+    if path.is_dir():
+        return "is a directory, expected a file"
+    if path.exists():
+        return "is not a regular file (a device, pipe or socket), expected a file"
+    return "file not found"
+
+
 def read_bytes(path: str | Path, limit: int = MAX_BYTES, what: str = "file") -> bytes:
     """The bytes of an input file, refusing directories, missing files and files larger than ``limit``.
 

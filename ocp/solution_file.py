@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from ..core.errors import ConfigError, brief, one_line
+from ..core.input_text import missing_file
 from .problem import Problem
 
 __all__ = ["brief_error", "open_solution_file", "read_solution_problem"]
@@ -43,9 +44,11 @@ def open_solution_file(path: str | Path, task: int | None = None) -> Iterator[tu
 
     path = Path(path)
     if path.is_dir():
+        if not (path / "solution.nc").is_file():
+            raise ConfigError(f"{path}: is a folder without a solution.nc (write one with mobisense solve)")
         path = path / "solution.nc"
     if not path.is_file():
-        raise ConfigError(f"{path}: file not found")
+        raise ConfigError(f"{path}: {missing_file(path)}")
     size, limit = path.stat().st_size, default_memory_limit()
     if size > limit:
         raise ConfigError(f"{path}: {format_bytes(size)} is more than the memory budget allows to load")

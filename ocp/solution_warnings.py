@@ -177,6 +177,9 @@ def init_warning(solution: Any) -> str | None:
         return ("init was not used: its NLP has another structure (sensors, states, constraints, collocation scheme "
                 "or degree, or horizon; another number of intervals is moved onto the grid); solved from coasting "
                 "(solver.strategy) as without it")  # fmt: skip
+    if start == StartKind.INIT_OTHER_METHOD:
+        return ("init was not used: it was solved by another method (a field's shooting or the indirect method), "
+                "which has no collocation point to start from; solved from coasting (solver.strategy) as without it")
     if start == StartKind.INIT_WITHOUT_POINT:
         return ("init was not used: it carries no converged ε = 1 NLP point (a failed solve, or one read from a "
                 "file); solved from coasting (solver.strategy) as without it")  # fmt: skip

@@ -28,3 +28,4 @@ class StartKind(str, Enum):
     COARSE = "ε-homotopy on the coarse grid (solver.shooting)"
     INIT_WITHOUT_POINT = "init ignored: it carries no converged ε = 1 NLP point"
     INIT_OTHER_LAYOUT = "init ignored: different structure or grid"
+    INIT_OTHER_METHOD = "init ignored: solved by another method"

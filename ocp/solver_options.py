@@ -10,7 +10,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from ..core.config import InvalidValue, StrictModel
+from ..core.config import FiniteFloat, InvalidValue, StrictModel
 from .field import ShootingOptions
 from .registries import BVPSolverName, HomotopyModeName, MethodName, SchemeName, StrategyName
 
@@ -112,7 +112,7 @@ class SolverOptions(StrictModel):
     bvp: BVPOptions = BVPOptions()
     tolerance: float = Field(1e-9, gt=0.0, lt=1e-2, description="Ipopt tol (scaled NLP error)")
     max_iterations: int = Field(500, ge=1, le=1_000_000)
-    time_limit: float | None = Field(None, gt=0.0, le=1e9, description="wall-clock limit of each Ipopt solve (s)")
+    time_limit: FiniteFloat | None = Field(None, gt=0.0, le=1e9, description="wall-clock limit of each Ipopt solve (s)")
 
     @model_validator(mode="after")
     def _shooting_ignores_nothing(self) -> SolverOptions:

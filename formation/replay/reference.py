@@ -79,9 +79,14 @@ def _check(
     from ...ocp.problem import load_problem
 
     problem = None if problem_path is None else load_problem(problem_path)  # ConfigError (one line) if invalid
+    if solution_path.is_dir() and (solution_path / "solution.nc").is_file():  # a solve's output folder
+        solution_path = solution_path / "solution.nc"
     if not solution_path.is_file():
-        if problem is None:
-            raise ConfigError(f"{solution_path}: file not found (give 'problem:' to solve it first)")
+        from ...core.input_text import missing_file
+
+        if problem is None or solution_path.exists():
+            hint = " (give 'problem:' to solve it first)" if not solution_path.exists() else ""
+            raise ConfigError(f"{solution_path}: {missing_file(solution_path)}{hint}")
         return None, problem, f"{solution_path} not found"
     solution, why = _read_solution(solution_path, task)
     current = None if problem is None else problem.digest()

@@ -198,6 +198,8 @@ def _start_from_solution(init: Solution | dict[str, Any], ctx: SolveContext) -> 
     The coasting guess is not made for it (a warm-started sweep task never needs it).
     """
     nlp = init.nlp if isinstance(init, Solution) else init
+    if isinstance(init, Solution) and init.method not in ("direct", "both"):  # a shooting or indirect solution
+        return StartKind.INIT_OTHER_METHOD, None
     if nlp is None or (isinstance(init, Solution) and init.eps != 1.0):
         return StartKind.INIT_WITHOUT_POINT, None
     if nlp["signature"] != repr(ctx.tr.signature):

@@ -216,3 +216,42 @@ def test_a_nul_escape_in_a_string_or_key_is_refused_where_it_is():
     with pytest.raises(ConfigError, match=r"f.json: vary.names\[1\]: a NUL character"):
         parse_document('{"vary": {"names": ["a", "b\\u0000"]}}', "f.json", json_syntax=True)
     assert parse('name: "a\\tb"\n') == {"name": "a\tb"}  # other escapes are text as before
+
+
+def test_a_union_names_every_alternative_and_a_mapping_is_said_to_be_one(tmp_path):
+    # red team: "cost.M: expected a valid list (got the string 'median') (and 1 more problem)" hid the names
+    # cost.M accepts; `problem: {a: 1}` said "expected a valid string" without what it got; --time-limit nan was
+    # "expected less than or equal to 1000000000 (got nan)"
+    from reference_problems import hussein2008
+
+    from mobisense.core.input_text import missing_file
+    from mobisense.ocp.problem import Problem
+
+    data = hussein2008()
+    data["cost"]["M"] = "median"
+    with pytest.raises(ConfigError, match=r"^<dict>: cost\.M: expected a valid list, or 'mean', 'sum' or 'zero' "
+                                          r"\(got the string 'median'\)$"):  # fmt: skip
+        Problem.from_dict(data)
+    data = hussein2008()
+    data["sensors"].append({**data["sensors"][0], "name": "s2"})
+    for sensor in data["sensors"]:
+        sensor["measures"] = "area"
+    with pytest.raises(ConfigError, match=r"sensors\[0\]\.measures: expected .*'point'.* \(and 1 more problem\)$"):
+        Problem.from_dict(data)  # one problem per key path: the two sensors' branches count two, not four
+
+    class Named(StrictModel):
+        problem: str
+
+    with pytest.raises(ConfigError, match=r"^f: problem: expected a valid string \(got a mapping\)$"):
+        parse_config({"problem": {"a": 1}}, Named, "f")
+    data = hussein2008()
+    data["solver"]["time_limit"] = float("nan")
+    with pytest.raises(ConfigError, match=r"solver\.time_limit: expected a finite number"):
+        Problem.from_dict(data)
+    # why a path is not a file to read, by kind
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "link").symlink_to(tmp_path / "gone")
+    assert missing_file(tmp_path / "nothing") == "file not found"
+    assert missing_file(tmp_path / "folder").startswith("is a directory")
+    assert missing_file(tmp_path / "link") == "broken symbolic link"
+    assert missing_file("/dev/zero").startswith("is not a regular file")

@@ -690,3 +690,15 @@ def test_a_grid_far_coarser_than_the_length_scale_is_reported_with_the_variance_
     assert "leave 96 % of the field's variance unknown between the nodes" in field_grid_warning(Solved)
     Solved.problem.process.field = spec(3.0, 5)
     assert field_grid_warning(Solved) is None
+
+
+def test_a_field_solution_given_as_init_to_the_direct_method_is_named_as_another_methods():
+    # red team: the warning said it "carries no converged ε = 1 NLP point (a failed solve, or one read from a file)"
+    # of a shooting solution that had converged: the reason is the method
+    shot = field_solution()
+    assert shot.success
+    data = field_problem()
+    data["solver"] = {"method": "direct", "collocation": {"intervals": 10}}
+    with pytest.warns(UserWarning, match="it was solved by another method"):
+        direct = ms.solve(ms.Problem.from_dict(data), init=shot)
+    assert direct.success and direct.stats["start"] == "init ignored: solved by another method"
