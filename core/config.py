@@ -25,6 +25,7 @@ import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
 
 from .errors import ConfigError, brief
+from .plain_data import plain_data
 from .reader import read_document
 
 __all__ = [
@@ -47,7 +48,6 @@ __all__ = [
     "format_location",
     "load_config",
     "parse_config",
-    "plain_data",
     "read_yaml",
 ]
 
@@ -407,47 +407,12 @@ def _misspellings(errors: list[dict[str, Any]], model: type[BaseModel]) -> dict[
 T = TypeVar("T", bound=BaseModel)
 
 
-def plain_data(data: Any) -> Any:
-    """``data`` with numpy arrays and tuples as lists and numpy scalars as Python numbers, recursively.
-
-    What a Python caller builds (``np.eye(3)``, ``np.int64(10)``, ``(1.0, 2.0)``) then validates as the YAML
-    value it stands for. Containers holding nothing to convert are returned as they are (no copy): a parsed
-    YAML document costs one pass over its containers.
-    """
-    kind = type(data)
-    if kind is list and all(map(_PLAIN.__contains__, map(type, data))):  # at C speed: vectors, matrix rows
-        return data
-    if kind is dict or kind is list:
-        out = None
-        for key, value in data.items() if kind is dict else enumerate(data):
-            if type(value) not in _PLAIN and (plain := plain_data(value)) is not value:
-                if out is None:
-                    out = kind(data)
-                out[key] = plain
-        return data if out is None else out
-    if kind in _PLAIN:
-        return data
-    if isinstance(data, np.ndarray):
-        return data.tolist()
-    if isinstance(data, np.generic):
-        return data.item()
-    if isinstance(data, dict):  # a mapping or sequence of another type: a dict or list of plain values
-        return {key: plain_data(value) for key, value in data.items()}
-    if isinstance(data, (list, tuple)):
-        return [plain_data(value) for value in data]
-    return data
-
-
-#: the types of YAML's scalar values: nothing to convert
-_PLAIN = frozenset({float, int, str, bool, type(None)})
-
-
 def parse_config(data: Any, model: type[T], source: str = "<dict>") -> T:
     """Validate ``data`` (a parsed YAML document) against ``model``; raise :class:`ConfigError` on failure.
 
     The message reports one problem (a misspelled required key first, as "unknown key; did you mean …",
     not as the missing key it causes) and how many more there are. Numpy arrays, numpy scalars and tuples are
-    validated as the lists and numbers they hold (:func:`plain_data`).
+    validated as the lists and numbers they hold (:func:`mobisense.core.plain_data.plain_data`).
     """
     try:
         data = plain_data(data)

@@ -702,3 +702,17 @@ def test_a_field_solution_given_as_init_to_the_direct_method_is_named_as_another
     with pytest.warns(UserWarning, match="it was solved by another method"):
         direct = ms.solve(ms.Problem.from_dict(data), init=shot)
     assert direct.success and direct.stats["start"] == "init ignored: solved by another method"
+
+
+def test_a_bound_far_below_the_control_unit_on_every_sensor_solves_to_the_no_control_cost():
+    # red team: u_max = 1e-9 on both sensors of a 3 × 3 field (feasible: u ≡ 0) ran Ipopt to its iteration limit —
+    # the row |u|²/u_max² − 1 in a control unit of ~0.1 had gradients of 1e16. With every sensor bounded below the
+    # unit, the unit is the smallest bound. The sensors can move at most ½·1e-9·T² = 1.3e-8 L, so J is the
+    # no-control J to about 1e-8 relative
+    data = field_problem(grid=(3, 3), sensors=2, shooting={"intervals": 10, "coarse_intervals": 5})
+    for sensor in data["sensors"]:
+        sensor["u_max"] = 1e-9
+    solution = ms.solve(ms.Problem.from_dict(data))
+    assert solution.success
+    assert solution.cost == pytest.approx(solution.baseline["cost"], rel=1e-8)
+    assert np.linalg.norm(solution.u, axis=2).max() <= 1e-9 * (1 + 1e-6)
