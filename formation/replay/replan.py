@@ -206,7 +206,13 @@ def run_replan(config: ReplanScenario, source: Path, seed: int | None = None) ->
 
 
 def _monte_carlo(problem: Any, config: ReplanScenario, d: DisturbanceOptions, seed: int | None) -> dict[str, Any]:
-    """:func:`mobisense.ocp.replan.replan_monte_carlo` with the file's settings."""
+    """:func:`mobisense.ocp.replan.replan_monte_carlo` with the file's settings.
+
+    The command checked the file's budget against its own ``--max-memory`` and ``--max-time`` before any work
+    (:func:`mobisense.formation.sizes.scenario_estimates`): the API's check, whose defaults are the command's
+    defaults, is passed the widest limits, so that a run the user allowed more is not refused here.
+    """
+    from ...core.budget import MEMORY_LIMITS, TIME_LIMITS
     from ...ocp.replan import Disturbance, replan_monte_carlo
 
     return replan_monte_carlo(
@@ -218,6 +224,8 @@ def _monte_carlo(problem: Any, config: ReplanScenario, d: DisturbanceOptions, se
         seed=d.seed if seed is None else seed,
         length=config.replan.length,
         warm_start=config.replan.warm_start,
+        max_memory=int(MEMORY_LIMITS[1]),
+        max_time=float(TIME_LIMITS[1]),
     )
 
 

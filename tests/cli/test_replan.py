@@ -153,3 +153,26 @@ def test_a_replan_whose_first_plan_fails_keeps_that_solve_and_exits_1(tmp_path, 
     from mobisense.ocp.solution import Solution
 
     assert Solution.load(out).problem.solver.max_iterations == 1  # the failed solve, readable as any solution
+
+
+def test_a_replan_file_allowed_more_time_than_the_default_is_not_refused_by_the_apis_own_check(
+    tmp_path, monkeypatch
+) -> None:
+    # the API's replan_monte_carlo checks its budget against the command's defaults (1 h, half the memory); the
+    # command checks the file against --max-time and --max-memory first, so a run allowed more must not be refused
+    # inside: the file's run hands the API the widest limits
+    import mobisense.ocp.replan as replan_module
+    from mobisense.core.budget import MEMORY_LIMITS, TIME_LIMITS
+    from mobisense.formation.replay.replan import ReplanScenario, run_replan
+
+    path = _files(tmp_path)
+    seen = {}
+
+    def record(problem, samples, limits, **arguments):  # stop at the API's check: no flight needed
+        seen["limits"] = limits
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(replan_module, "check_replan_arguments", record)
+    with pytest.raises(KeyboardInterrupt):
+        run_replan(ReplanScenario.model_validate(yaml.safe_load(path.read_text())), path)
+    assert seen["limits"] == (MEMORY_LIMITS[1], TIME_LIMITS[1])
