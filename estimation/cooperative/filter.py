@@ -251,8 +251,9 @@ class CooperativeKalmanFilter:
         ``(..., 3)`` and covariance ``(..., 3, 3)``.
         """
         positions = np.asarray(positions, dtype=float)
-        if positions.ndim < 2 or positions.shape[-1] != 2 or positions.shape[-2] == 0:  # shapes only: hot path
-            raise ValueError(f"positions: expected shape (..., N, 2) with N >= 1, got {positions.shape}")
+        shape = positions.shape
+        if len(shape) < 2 or shape[-1] != 2 or not shape[-2]:  # shapes only (hot path: ~60 ns of a ~4 µs step)
+            raise ValueError(f"positions: expected shape (..., N, 2) with N >= 1, got {shape}")
         if self._compiled is not None:
             x, P = np.empty((3, 1)), np.empty((3, 3))
             self._compiled[0](self.state, self.covariance, self.positions, positions, self.hessian,
@@ -274,15 +275,15 @@ class CooperativeKalmanFilter:
         is used when omitted. Returns the posterior state ``(..., 3)`` and covariance ``(..., 3, 3)``.
         """
         measurements = np.asarray(measurements, dtype=float)
+        if hessian is not None:
+            self.hessian = np.asarray(hessian, dtype=float)
+        if self._compiled is not None:
+            return self._update_compiled(measurements)  # which checks the shapes
         if measurements.shape[-1:] != self.positions.shape[-2:-1]:  # shapes only: hot path
             raise ValueError(
                 f"measurements: expected shape (..., {self.positions.shape[-2]}), one per platform, "
                 f"got {measurements.shape}"
             )
-        if hessian is not None:
-            self.hessian = np.asarray(hessian, dtype=float)
-        if self._compiled is not None:
-            return self._update_compiled(measurements)
         C, D = taylor_matrices(self.positions)
         y = measurements - (D @ hessian_to_vec(self.hessian)[..., None])[..., 0]
         self.state, self.covariance, self.innovation, self.innovation_covariance = kalman.update(
@@ -293,10 +294,14 @@ class CooperativeKalmanFilter:
 
     def _update_compiled(self, measurements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         N = self.positions.shape[0]
-        if self.hessian.shape != (2, 2) or measurements.shape != (N,):
+        if measurements.shape != (N,) or self.hessian.shape != (2, 2):
+            name, expected, got = (
+                ("measurements", f"({N},), one per platform", measurements.shape) if measurements.shape != (N,)
+                else ("hessian", "(2, 2)", self.hessian.shape)
+            )  # fmt: skip
             raise ValueError(
-                f"backend 'numba' filters a single run: expected hessian (2, 2) and measurements ({N},), "
-                f"got {self.hessian.shape} and {measurements.shape} (use backend='numpy' for batches)"
+                f"{name}: expected shape {expected} (backend 'numba' filters a single run; use backend='numpy' for "
+                f"batches), got {got}"
             )
         if self._R0 is None or self._R0[0] is not self.noise or self._R0[1].shape[0] != N:
             self._R0 = (self.noise, np.ascontiguousarray(self.noise.measurement_matrix(N)))
