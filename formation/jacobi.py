@@ -30,16 +30,40 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ClusterTree", "default_tree", "jacobi_matrix", "JacobiTransform"]
+from ..core.errors import brief
+
+__all__ = ["ClusterTree", "MAX_PLATFORMS", "default_tree", "jacobi_matrix", "JacobiTransform"]
 
 #: a platform index or a pair of sub-trees
 ClusterTree = int | tuple["ClusterTree", "ClusterTree"]
 
+#: most platforms a Jacobi transform accepts. ``Ψ`` is a dense N × N matrix, built from N − 1 columns of length
+#: N (2 N² floats at the peak: 270 MB at 4096) and applied at every right-hand-side evaluation of a simulation
+#: (N² multiply-adds). Formations in the literature and in scenario files have 2–64 platforms (a scenario's
+#: ``platforms.count`` is at most 64), :func:`~mobisense.estimation.cooperative.steady_state.steady_state` takes
+#: up to 5000; 4096 leaves room for any realistic formation while a typo (10⁶) fails at once instead of
+#: allocating 16 TB until MemoryError.
+MAX_PLATFORMS = 4096
+
+
+def _check_count(n_platforms: int) -> int:
+    """``n_platforms`` if it is an integer in 2 … :data:`MAX_PLATFORMS`, else ``ValueError`` (before any allocation)."""
+    if isinstance(n_platforms, bool) or not isinstance(n_platforms, (int, np.integer)):
+        raise ValueError(f"n_platforms: expected an integer, got {brief(n_platforms)}")
+    if not 2 <= n_platforms <= MAX_PLATFORMS:
+        raise ValueError(
+            f"n_platforms: expected 2 … {MAX_PLATFORMS} platforms (a formation needs at least 2; Ψ is a dense N × N "
+            f"matrix), got {n_platforms}"
+        )
+    return int(n_platforms)
+
 
 def default_tree(n_platforms: int) -> ClusterTree:
-    """Balanced bisection of ``0 … N−1`` with the second half mirrored (N = 4: ``((0, 1), (3, 2))``)."""
-    if n_platforms < 2:
-        raise ValueError(f"n_platforms: a formation needs at least 2 platforms, got {n_platforms}")
+    """Balanced bisection of ``0 … N−1`` with the second half mirrored (N = 4: ``((0, 1), (3, 2))``).
+
+    ``n_platforms`` is an integer in 2 … :data:`MAX_PLATFORMS` (``ValueError`` otherwise).
+    """
+    n_platforms = _check_count(n_platforms)
 
     def build(indices: list[int]) -> ClusterTree:
         if len(indices) == 1:
@@ -69,7 +93,14 @@ def jacobi_matrix(n_platforms: int, tree: ClusterTree | None = None) -> np.ndarr
     -------
     ndarray, shape (N, N)
         Column 0 is ``1/N``; columns 1 … N−1 are the orthonormal Jacobi directions.
+
+    Raises
+    ------
+    ValueError
+        For ``n_platforms`` outside 2 … :data:`MAX_PLATFORMS` (checked before anything is allocated), or a
+        tree that does not cover each platform once.
     """
+    n_platforms = _check_count(n_platforms)
     tree = default_tree(n_platforms) if tree is None else tree
     leaves = _leaves(tree)
     if sorted(leaves) != list(range(n_platforms)):
@@ -100,7 +131,7 @@ class JacobiTransform:
     Parameters
     ----------
     n_platforms : int
-        N ≥ 2.
+        2 ≤ N ≤ :data:`MAX_PLATFORMS`.
     tree : ClusterTree, optional
         Cluster tree defining the Jacobi vectors (default :func:`default_tree`).
 

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.config import PositiveFloat, StrictModel
+from ..estimation.checks import check_positive
 
 __all__ = ["PlatformLimits", "PlatformLimitsConfig", "newton_rates"]
 
@@ -32,10 +33,21 @@ class PlatformLimits:
         ``f_max`` (L/T²).
     max_speed : float, optional
         ``v_max`` (L/T).
+
+    Raises
+    ------
+    ValueError
+        For a limit that is not a number > 0 (``inf``, like ``None``, is no limit; NaN is refused).
     """
 
     max_force: float | None = None
     max_speed: float | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("max_force", "max_speed"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, check_positive(name, value, allow_inf=True))
 
     def apply(self, forces: np.ndarray, velocities: np.ndarray) -> np.ndarray:
         """Applied forces ``(..., N, 2)`` for commanded ``forces`` at ``velocities`` ``(..., N, 2)``."""

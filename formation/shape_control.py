@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..estimation.checks import check_finite, check_finite_array, check_positive
 from ..estimation.cooperative.information_model import rotation
 
 __all__ = [
@@ -68,8 +69,8 @@ class FixedShapeController:
     damping: float
 
     def __post_init__(self) -> None:
-        if not (self.stiffness > 0 and self.damping > 0):
-            raise ValueError(f"stiffness and damping must be > 0, got {self.stiffness}, {self.damping}")
+        for name in ("stiffness", "damping"):
+            object.__setattr__(self, name, check_positive(name, getattr(self, name)))
 
     def __call__(
         self,
@@ -122,9 +123,13 @@ class RotatingShapeController:
     angular_gain: float
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "p_desired", np.asarray(self.p_desired, dtype=float))
-        if min(self.shape_stiffness, self.shape_damping, self.angular_gain) <= 0:
-            raise ValueError("shape_stiffness, shape_damping and angular_gain must be > 0")
+        p_desired = check_finite_array("p_desired", self.p_desired, "(N−1, 2) with N >= 2",
+                                       lambda s: len(s) == 2 and s[0] >= 1 and s[1] == 2)  # fmt: skip
+        object.__setattr__(self, "p_desired", p_desired)
+        for name in ("shape_stiffness", "shape_damping", "angular_gain"):
+            object.__setattr__(self, name, check_positive(name, getattr(self, name)))
+        if not callable(self.angular_speed):
+            object.__setattr__(self, "angular_speed", check_finite("angular_speed", self.angular_speed))
 
     def desired_rate(self, t: float) -> tuple[float, float]:
         """``(Ω^d(t), Ω^d'(t))``."""

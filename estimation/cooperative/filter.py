@@ -42,6 +42,7 @@ from typing import Any, Literal, Protocol
 import numpy as np
 
 from .. import kalman
+from ..checks import check_finite_array
 from .information_model import (
     formation_center,
     hessian_drift,
@@ -202,6 +203,14 @@ class CooperativeKalmanFilter:
     Call :meth:`update` at the initial positions first (there is no prediction before it), then
     :meth:`predict` and :meth:`update` at each new formation position. Each step makes new arrays:
     what :meth:`predict` returned is still the prior after :meth:`update`.
+
+    Any N >= 1 is accepted, unlike :func:`run_cooperative_filter` (N >= 3): observability is a property of a
+    window of steps (docs/theory/cooperative.md §4, Cd5), and the step API runs pairs (N = 2) that rotate. A
+    formation that cannot see the gradient at one instant (one platform, collinear or coincident platforms)
+    leaves the unobserved directions of ``P`` at their prior, so the covariance says what is not known;
+    motion of the centre observes the gradient along it. N may change between steps (the estimate moves to
+    the centre of the positions given). The constructor refuses a prior that is not finite and symmetric
+    positive semidefinite (a singular one, e.g. a known initial value, is fine); each step checks shapes only.
     """
 
     def __init__(
@@ -214,15 +223,14 @@ class CooperativeKalmanFilter:
         backend: Literal["auto", "numba", "numpy"] = "auto",
     ) -> None:
         self.noise = noise
-        self.state = np.asarray(initial_state, dtype=float)[..., None]
+        self.state = check_finite_array("initial_state", initial_state, "(..., 3)", lambda s: s[-1:] == (3,))[..., None]
+        check_prior(initial_covariance)  # finite, symmetric positive semidefinite (..., 3, 3): once, not per step
         self.covariance = np.asarray(initial_covariance, dtype=float)
-        self.positions = np.asarray(initial_positions, dtype=float)
-        self.hessian = np.zeros((2, 2)) if initial_hessian is None else np.asarray(initial_hessian, dtype=float)
-        if self.state.shape[-2] != 3 or self.covariance.shape[-2:] != (3, 3):
-            raise ValueError(
-                f"initial_state/initial_covariance: expected shapes (..., 3) and (..., 3, 3), "
-                f"got {self.state.shape[:-1]} and {self.covariance.shape}"
-            )
+        self.positions = check_finite_array("initial_positions", initial_positions, "(..., N, 2) with N >= 1",
+                                            lambda s: len(s) >= 2 and s[-1] == 2 and s[-2] >= 1)  # fmt: skip
+        self.hessian = np.zeros((2, 2)) if initial_hessian is None else check_finite_array(
+            "initial_hessian", initial_hessian, "(..., 2, 2)", lambda s: s[-2:] == (2, 2)
+        )  # fmt: skip
         single = (
             self.state.shape == (3, 1) and self.covariance.shape == (3, 3) and self.positions.ndim == 2
             and self.hessian.shape == (2, 2)
@@ -243,6 +251,9 @@ class CooperativeKalmanFilter:
         ``(..., 3)`` and covariance ``(..., 3, 3)``.
         """
         positions = np.asarray(positions, dtype=float)
+        shape = positions.shape
+        if len(shape) < 2 or shape[-1] != 2 or not shape[-2]:  # shapes only (hot path: ~60 ns of a ~4 µs step)
+            raise ValueError(f"positions: expected shape (..., N, 2) with N >= 1, got {shape}")
         if self._compiled is not None:
             x, P = np.empty((3, 1)), np.empty((3, 3))
             self._compiled[0](self.state, self.covariance, self.positions, positions, self.hessian,
@@ -263,12 +274,18 @@ class CooperativeKalmanFilter:
         ``hessian`` ``(..., 2, 2)`` is ``Ĥ_{c,k}`` (kept for the next prediction); the current estimate
         is used when omitted. Returns the posterior state ``(..., 3)`` and covariance ``(..., 3, 3)``.
         """
+        measurements = np.asarray(measurements, dtype=float)
         if hessian is not None:
             self.hessian = np.asarray(hessian, dtype=float)
         if self._compiled is not None:
-            return self._update_compiled(np.asarray(measurements, dtype=float))
+            return self._update_compiled(measurements)  # which checks the shapes
+        if measurements.shape[-1:] != self.positions.shape[-2:-1]:  # shapes only: hot path
+            raise ValueError(
+                f"measurements: expected shape (..., {self.positions.shape[-2]}), one per platform, "
+                f"got {measurements.shape}"
+            )
         C, D = taylor_matrices(self.positions)
-        y = np.asarray(measurements, dtype=float) - (D @ hessian_to_vec(self.hessian)[..., None])[..., 0]
+        y = measurements - (D @ hessian_to_vec(self.hessian)[..., None])[..., 0]
         self.state, self.covariance, self.innovation, self.innovation_covariance = kalman.update(
             self.state, self.covariance, y[..., None], C, self.noise.total_measurement_covariance(D)
         )
@@ -277,10 +294,14 @@ class CooperativeKalmanFilter:
 
     def _update_compiled(self, measurements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         N = self.positions.shape[0]
-        if self.hessian.shape != (2, 2) or measurements.shape != (N,):
+        if measurements.shape != (N,) or self.hessian.shape != (2, 2):
+            name, expected, got = (
+                ("measurements", f"({N},), one per platform", measurements.shape) if measurements.shape != (N,)
+                else ("hessian", "(2, 2)", self.hessian.shape)
+            )  # fmt: skip
             raise ValueError(
-                f"backend 'numba' filters a single run: expected hessian (2, 2) and measurements ({N},), "
-                f"got {self.hessian.shape} and {measurements.shape} (use backend='numpy' for batches)"
+                f"{name}: expected shape {expected} (backend 'numba' filters a single run; use backend='numpy' for "
+                f"batches), got {got}"
             )
         if self._R0 is None or self._R0[0] is not self.noise or self._R0[1].shape[0] != N:
             self._R0 = (self.noise, np.ascontiguousarray(self.noise.measurement_matrix(N)))

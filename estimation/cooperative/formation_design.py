@@ -189,6 +189,12 @@ def design_cross_formation(
 
     The result also carries ``steady_state`` (:class:`~mobisense.estimation.cooperative.steady_state.SteadyState` at the
     optimum: ``P∞`` diagonal, gain ``K∞``).
+
+    Raises
+    ------
+    RuntimeError
+        When ``tr P∞`` or the optimum is not finite: noise levels so far apart (e.g. ``σ1 = 1e-90``,
+        ``σ2 = 1e90``) that the closed form over- or underflows.
     """
     f = cross_trace_function()
     sigmas = [sigma_process, sigma_measurement, sigma_hessian]
@@ -198,6 +204,11 @@ def design_cross_formation(
         return float(value), np.asarray(g).ravel(), np.asarray(H)
 
     design = minimise_shape(objective, bounds, equal_sides)
+    if not (np.all(np.isfinite(design.x)) and np.isfinite(design.fun)):
+        raise RuntimeError(
+            f"the steady state is not finite (tr P = {design.fun:g} at a, b = {design.x[0]:g}, {design.x[1]:g}): the "
+            "noise levels make the Riccati equation degenerate"
+        )
     design.steady_state = cross_steady_state(design.x[0], design.x[1], *sigmas)
     return design
 

@@ -44,8 +44,10 @@ class CooperativeNoise:
         if U.shape != (4, 4):
             raise ValueError(f"hessian_error covariance U: expected shape (4, 4), got {U.shape}")
         R = np.asarray(self.measurement, dtype=float)
-        if R.ndim > 2:
-            raise ValueError(f"measurement covariance R: expected a scalar, (N,) or (N, N), got shape {R.shape}")
+        if R.ndim > 2 or R.size == 0:
+            raise ValueError(
+                f"measurement covariance R: expected a scalar, (N,) or (N, N) with N >= 1, got shape {R.shape}"
+            )
         for name, matrix in (("process covariance M", M), ("hessian_error covariance U", U),
                              ("measurement covariance R", R if R.ndim == 2 else np.diag(np.atleast_1d(R)))):
             _check_covariance(name, matrix)

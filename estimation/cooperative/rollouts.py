@@ -281,8 +281,10 @@ def check_prior(P0: np.ndarray, process: np.ndarray | None = None) -> None:
     ``F P⁺ F' + M`` is invertible only if ``M`` is positive definite.
     """
     P = np.asarray(P0, dtype=float)
-    if P.shape[-2:] != (3, 3) or not np.all(np.isfinite(P)):
-        raise ValueError(f"initial_covariance: expected finite ([B,] 3, 3) matrices, got shape {P.shape}")
+    if P.shape[-2:] != (3, 3):
+        raise ValueError(f"initial_covariance: expected ([B,] 3, 3) matrices, got shape {P.shape}")
+    if not np.all(np.isfinite(P)):
+        raise ValueError(f"initial_covariance: expected finite numbers, got {P.size - np.isfinite(P).sum()} non-finite")
     eigenvalues = np.linalg.eigvalsh(0.5 * (P + np.swapaxes(P, -1, -2)))
     scale = np.maximum(1.0, np.abs(P).max(axis=(-1, -2)))
     if np.any(np.abs(P - np.swapaxes(P, -1, -2)) > 1e-12 * scale[..., None, None]) or np.any(

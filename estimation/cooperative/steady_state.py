@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from ..checks import check_non_negative, check_positive
 from .information_model import cross_formation, taylor_matrices
 from .noise_config import CooperativeNoise
 
@@ -305,7 +306,19 @@ def cross_steady_state(
     -------
     SteadyState
         ``posterior = diag(p1, p2, p3)``.
+
+    Raises
+    ------
+    ValueError
+        Unless ``a, b, σ1, σ2`` are finite and > 0 and ``σ3`` finite and >= 0: ``a = 0`` or ``b = 0`` is a
+        collinear formation (unbounded steady state, as :func:`steady_state` refuses), ``σ1 = 0`` has no
+        stabilising solution and ``σ2 = 0`` divides by zero (the rules of
+        :class:`~mobisense.estimation.cooperative.noise_config.NoiseConfig`).
     """
+    a, b = check_positive("a", a), check_positive("b", b)
+    sigma_process = check_positive("sigma_process", sigma_process)
+    sigma_measurement = check_positive("sigma_measurement", sigma_measurement)
+    sigma_hessian = check_non_negative("sigma_hessian", sigma_hessian)
     c = np.array(cross_information(a, b, sigma_measurement, sigma_hessian))
     # docs/theory/steady_state.md, eq. steady_state.4
     posterior = np.diag(_posterior_diagonal(c, sigma_process, np.sqrt))

@@ -29,6 +29,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ...core.errors import brief
+from ..checks import check_finite_array, check_non_negative, check_positive
+
 __all__ = [
     "KHEPERA_MOUNT_ANGLES_DEG",
     "KHEPERA_PAIRS",
@@ -170,6 +173,14 @@ class RangeSensorRing:
         Radius ``r`` of the target robot (m), eq. 42.
     pairs : ndarray of int, shape (P, 2)
         0-based sensor indices ``(q−1, q)`` of each pair.
+
+    Raises
+    ------
+    ValueError
+        Unless ``mount_radius`` and ``max_range`` are finite and > 0, ``field_of_view`` is in (0, 2π],
+        ``noise_std`` and ``target_radius`` are finite and >= 0, ``mount_angles`` and ``headings`` are finite
+        and of the same length S >= 2, and ``pairs`` has P >= 1 rows of two different indices in 0 … S−1 (the
+        rules of the ``sensing: {mode: ring}`` block of a scenario file).
     """
 
     mount_radius: float
@@ -180,6 +191,29 @@ class RangeSensorRing:
     noise_std: float
     target_radius: float = 0.0
     pairs: np.ndarray = field(default_factory=lambda: np.asarray(KHEPERA_PAIRS) - 1)
+
+    def __post_init__(self) -> None:
+        for name in ("mount_radius", "max_range"):
+            object.__setattr__(self, name, check_positive(name, getattr(self, name)))
+        for name in ("noise_std", "target_radius"):
+            object.__setattr__(self, name, check_non_negative(name, getattr(self, name)))
+        fov = check_positive("field_of_view", self.field_of_view)
+        if fov > 2 * np.pi:
+            raise ValueError(f"field_of_view: expected a full opening angle in (0, 2π] rad, got {fov:g}")
+        angles = check_finite_array("mount_angles", self.mount_angles, "(S,) with S >= 2",
+                                    lambda s: len(s) == 1 and s[0] >= 2)  # fmt: skip
+        S = angles.shape[0]
+        headings = check_finite_array("headings", self.headings, f"({S},), one per sensor", lambda s: s == (S,))
+        pairs = np.asarray(self.pairs)
+        if (pairs.ndim != 2 or pairs.shape[0] < 1 or pairs.shape[1] != 2 or pairs.dtype.kind not in "iu"
+                or np.any((pairs < 0) | (pairs >= S)) or np.any(pairs[:, 0] == pairs[:, 1])):  # fmt: skip
+            raise ValueError(
+                f"pairs: expected P >= 1 rows of two different integer sensor indices in 0 … {S - 1}, "
+                f"got {brief(pairs)}"
+            )
+        object.__setattr__(self, "field_of_view", fov)
+        for name, value in (("mount_angles", angles), ("headings", headings), ("pairs", pairs)):
+            object.__setattr__(self, name, value)
 
     @property
     def n_pairs(self) -> int:

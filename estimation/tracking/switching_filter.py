@@ -27,12 +27,15 @@ docs/theory/departures.md):
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
+from ...core.errors import brief
 from ...core.registry import Registry
+from ..checks import check_non_negative, check_positive
 from ..kalman import predict, symmetrize, update
 
 __all__ = [
@@ -68,8 +71,15 @@ def random_walk_model(sample_time: float, acceleration_std: float) -> tuple[np.n
         State transition.
     Q : ndarray, shape (4, 4)
         Process-noise covariance ``G q G'``.
+
+    Raises
+    ------
+    ValueError
+        Unless ``sample_time`` is finite and > 0 and ``acceleration_std`` finite and >= 0 (0: a target at
+        constant velocity).
     """
-    h = sample_time
+    h = check_positive("sample_time", sample_time)
+    acceleration_std = check_non_negative("acceleration_std", acceleration_std)
     # docs/theory/leader_follower.md, eq. leader_follower.20: x_{t+1} = A x_t + G w_t
     A = np.eye(4)
     A[0, 2] = A[1, 3] = h
@@ -162,6 +172,12 @@ class SwitchingKalmanFilter:
     initial_velocity_std : float
         Prior standard deviation of each velocity component at the first detection (m/s); the prior
         velocity mean is zero.
+
+    Raises
+    ------
+    ValueError
+        Unless ``n_pairs`` is an integer >= 1, ``sample_time`` finite and > 0, and ``acceleration_std`` and
+        ``initial_velocity_std`` finite and >= 0 (zero is a deterministic model or a known velocity).
     """
 
     def __init__(
@@ -174,9 +190,13 @@ class SwitchingKalmanFilter:
     ) -> None:
         if merge not in MERGES:
             raise ValueError(MERGES.unknown(merge))
+        if isinstance(n_pairs, bool) or not isinstance(n_pairs, (int, np.integer)) or n_pairs < 1:
+            raise ValueError(
+                f"n_pairs: expected an integer >= 1 (one sub-filter per sensor pair), got {brief(n_pairs)}"
+            )
         self.A, self.Q = random_walk_model(sample_time, acceleration_std)
         self.merge = MERGES[merge]
-        self.initial_velocity_std = float(initial_velocity_std)
+        self.initial_velocity_std = check_non_negative("initial_velocity_std", initial_velocity_std)
         self.states = np.full((n_pairs, 4), np.nan)
         self.covariances = np.full((n_pairs, 4, 4), np.nan)
         self.was_active = np.zeros(n_pairs, dtype=bool)
@@ -201,8 +221,17 @@ class SwitchingKalmanFilter:
         Returns
         -------
         SwitchingStep
+
+        Raises
+        ------
+        ValueError
+            For arrays of other shapes, or an active pair whose position is not finite or whose covariance is
+            not symmetric positive semidefinite (inactive pairs are not read: NaN there is fine).
         """
         active = np.asarray(active, dtype=bool)
+        positions = np.asarray(positions, dtype=float)
+        position_covariances = np.asarray(position_covariances, dtype=float)
+        _check_pairs(self.states.shape[0], active, positions, position_covariances)
         prior = prior_P = None
         if self.state is not None:
             x, prior_P = predict(self.state[:, None], self.covariance, self.A, self.Q)
@@ -242,3 +271,31 @@ class SwitchingKalmanFilter:
         state = self.state if self.state is not None else np.full(4, np.nan)
         covariance = self.covariance if self.covariance is not None else np.full((4, 4), np.nan)
         return SwitchingStep(state.copy(), covariance.copy(), active, selected)
+
+
+def _check_pairs(n_pairs: int, active: np.ndarray, positions: np.ndarray, covariances: np.ndarray) -> None:
+    """Raise ``ValueError`` unless the pair measurements of one step have the filter's shapes and usable values.
+
+    Called every step, so the active pairs (a handful) are judged by scalar arithmetic, ~0.5 µs each (numpy's
+    per-call overhead would cost 4x more): finite positions and 2 × 2 covariances whose symmetric part has
+    smallest eigenvalue ``(a + d)/2 − √(((a − d)/2)² + b²)`` >= 0, with the tolerance of
+    :func:`mobisense.core.config.check_psd`.
+    """
+    P = n_pairs
+    if active.shape != (P,) or positions.shape != (P, 2) or covariances.shape != (P, 2, 2):
+        raise ValueError(
+            f"active, positions, position_covariances: expected shapes ({P},), ({P}, 2), ({P}, 2, 2) for {P} pairs, "
+            f"got {active.shape}, {positions.shape}, {covariances.shape}"
+        )
+    rows = zip(active.tolist(), positions.tolist(), covariances.reshape(P, 4).tolist(), strict=True)
+    for j, (on, (x, y), (a, b, c, d)) in enumerate(rows):
+        if not on:
+            continue
+        if not (math.isfinite(x) and math.isfinite(y)):
+            raise ValueError(f"positions: expected a finite position for the active pair {j}, got {[x, y]}")
+        tol = 1e-12 * max(1.0, abs(a), abs(d))
+        if not (abs(b - c) <= tol and 0.5 * (a + d) - math.hypot(0.5 * (a - d), b) >= -tol):  # False for NaN
+            raise ValueError(
+                "position_covariances: expected a symmetric positive semidefinite (2, 2) matrix for the active "
+                f"pair {j}, got {brief([[a, b], [c, d]])}"
+            )
