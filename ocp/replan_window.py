@@ -37,6 +37,7 @@ import numpy as np
 
 from .discretisation import discretise_process
 from .problem import Problem
+from .solve_outcome import StartKind
 
 __all__ = [
     "WARM_STARTS",
@@ -86,6 +87,8 @@ def unconverged_plan_flyable(solution: Any) -> bool:
     record = solution.stats.get("unconverged") if not solution.success else None
     if not record or record["status"] not in BUDGET_STATUSES or not np.isfinite(record["cost"]):
         return False
+    if solution.stats.get("start") != StartKind.WARM.value:  # a cold window started from its own homotopy: its
+        return False  # start is not the plan the flight would fly instead, so "better than its start" says nothing
     if record["violation"] > FEASIBLE_ROW_VIOLATION:
         return False
     return record["start_violation"] > FEASIBLE_ROW_VIOLATION or record["cost"] <= record["start_cost"]

@@ -359,3 +359,5 @@ def test_a_field_window_that_runs_out_of_iterations_is_flown_when_feasible_and_b
         assert not unconverged_plan_flyable(new)
     new.stats["unconverged"] = {**unconverged, "cost": unconverged["start_cost"] * 1.01, "start_violation": 1.0}
     assert unconverged_plan_flyable(new)  # any feasible end beats a start that breaks the constraints
+    new.stats["unconverged"], new.stats["start"] = unconverged, "ε-homotopy on the coarse grid (solver.shooting)"
+    assert not unconverged_plan_flyable(new)  # a cold window's start is its homotopy's, not the plan flown instead
