@@ -161,8 +161,9 @@ def solve_shooting(
         ))  # fmt: skip
     message = f"Ipopt (L-BFGS, ε = 1 on K = {fine.K}): {info['status']}"
     if not info["success"]:
-        stats["unconverged"] = _unconverged(fine, w_start, w, cost_scale, info["status"])
-        worst = fine.worst_violation(fine.rows(w, cost_scale), float(fine.parameters(1.0, cost_scale)[2]))
+        rows = fine.rows(w, cost_scale)
+        stats["unconverged"] = _unconverged(fine, w_start, result, rows, cost_scale, info["status"])
+        worst = fine.worst_violation(rows, float(fine.parameters(1.0, cost_scale)[2]))
         if worst is not None:
             stats["worst_violation"] = worst
             message += (f"; worst-violated constraint: {worst['constraint']} at t = {worst['time']:.4g} "
@@ -176,17 +177,16 @@ def solve_shooting(
     )  # fmt: skip
 
 
-def _unconverged(fine: FieldShooting, w_start: np.ndarray, w: np.ndarray, cost_scale: float,
+def _unconverged(fine: FieldShooting, w_start: np.ndarray, end: Any, rows: np.ndarray, cost_scale: float,
                  status: str) -> dict[str, Any]:  # fmt: skip
     """What a failed fine solve ended on, against where it started.
 
     Ipopt's status, and J and the largest scaled row violation (the rows are O(1) by construction) of the start and
-    the end: a caller can tell a feasible plan that only ran out of iterations and improved on its start
-    (re-planning flies it: :func:`mobisense.ocp.replan_window.unconverged_plan_flyable`).
+    of the end (its trajectory ``end`` and rows ``rows``, already evaluated): a caller can tell a feasible plan that
+    only ran out of iterations and improved on its start (re-planning flies it:
+    :func:`mobisense.ocp.replan_window.unconverged_plan_flyable`).
     """
-    ends = {}
-    for name, point in (("start", w_start), ("end", w)):
-        costs = fine.evaluate(point, cost_scale).costs
-        ends[name] = (costs[0] + costs[1], float(fine.row_excess(fine.rows(point, cost_scale)).max(initial=0.0)))
-    return {"status": status, "cost": ends["end"][0], "violation": ends["end"][1],
-            "start_cost": ends["start"][0], "start_violation": ends["start"][1]}  # fmt: skip
+    start = fine.evaluate(w_start, cost_scale).costs
+    return {"status": status, "cost": end.costs[0] + end.costs[1],
+            "violation": float(fine.row_excess(rows).max(initial=0.0)), "start_cost": start[0] + start[1],
+            "start_violation": float(fine.row_excess(fine.rows(w_start, cost_scale)).max(initial=0.0))}  # fmt: skip

@@ -28,7 +28,8 @@ from ..core.config import (
 )
 from .problem import Problem
 
-__all__ = ["DisturbanceArguments", "ReplanArguments", "check_replan_arguments", "replan_estimates", "MAX_RUNS"]
+__all__ = ["DisturbanceArguments", "ReplanArguments", "check_replan_arguments", "check_horizon", "replan_estimates",
+           "MAX_RUNS"]  # fmt: skip
 
 #: most Monte Carlo runs (as a scenario file's ``monte_carlo.runs``)
 MAX_RUNS = 100_000
@@ -89,21 +90,45 @@ def check_replan_arguments(
     source = "replan_monte_carlo"
     check_limits(*limits, source)
     args = parse_config(arguments, ReplanArguments, source=source)
-    span = problem.horizon.tf - problem.horizon.t0
-    if problem.solver.method not in ("direct", "shooting"):
-        raise ConfigError(f"{source}: problem: re-planning solves by direct collocation (or a field's shooting); "
-                          f"the problem's solver.method is {problem.solver.method!r}")  # fmt: skip
-    if args.length is not None and args.length > span:
-        raise ConfigError(f"{source}: length: expected a window within the horizon, ≤ tf − t0 = {span:g}, "
-                          f"got {args.length:g}")  # fmt: skip
-    if args.time_step > span / 2:
-        raise ConfigError(f"{source}: time_step: expected at most half the horizon ({span / 2:g}), "
-                          f"got {args.time_step:g}")  # fmt: skip
+    check_horizon(problem, args.length, args.time_step, source)
     hint = "use fewer runs, a larger time_step or a larger every"
     estimates = replan_estimates(problem, args.runs, args.every, args.time_step, plan_samples, hint, args.length,
                                  args.warm_start)  # fmt: skip
     check_budget(estimates, limits[0], source, limits[1])
     return args
+
+
+def check_horizon(problem: Problem, length: float | None, time_step: float, source: str,
+                  length_key: str = "length", step_key: str = "time_step") -> None:  # fmt: skip
+    """Refuse a problem re-planning cannot solve, a window longer than its horizon or a step over half of it.
+
+    Parameters
+    ----------
+    problem : Problem
+    length : float or None
+        Receding-horizon window length (T); None: shrinking horizon.
+    time_step : float
+        The flight's step (T).
+    source : str
+        Who was given them, first in the message (a file, or ``replan_monte_carlo``).
+    length_key, step_key : str
+        Their names there (``replan.length`` and ``monte_carlo.time_step`` in a ``kind: replan`` file).
+
+    Raises
+    ------
+    ConfigError
+        One line naming ``source`` and the key.
+    """
+    span = problem.horizon.tf - problem.horizon.t0
+    if problem.solver.method not in ("direct", "shooting"):
+        raise ConfigError(f"{source}: problem: re-planning solves by direct collocation (or a field's shooting); "
+                          f"the problem's solver.method is {problem.solver.method!r}")  # fmt: skip
+    if length is not None and length > span:
+        raise ConfigError(f"{source}: {length_key}: expected a window within the horizon, ≤ tf − t0 = {span:g}, "
+                          f"got {length:g}")  # fmt: skip
+    if time_step > span / 2:
+        raise ConfigError(f"{source}: {step_key}: expected at most half the horizon ({span / 2:g}), "
+                          f"got {time_step:g}")  # fmt: skip
 
 
 def replan_estimates(

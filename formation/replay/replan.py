@@ -172,21 +172,14 @@ def check_against_problem(config: ReplanScenario, source: Path) -> Any:
     """
     from ...core.errors import ConfigError
     from ...ocp.problem import load_problem
+    from ...ocp.replan_inputs import check_horizon
 
     try:
         problem = load_problem(Path(source).parent / config.problem)
     except ConfigError as err:
         raise ConfigError(f"{source}: problem: {err}") from None
-    span = problem.horizon.tf - problem.horizon.t0
-    if problem.solver.method not in ("direct", "shooting"):
-        raise ConfigError(f"{source}: problem: re-planning solves by direct collocation (or a field's shooting); the "
-                          f"problem's solver.method is {problem.solver.method!r}")  # fmt: skip
-    if config.replan.length is not None and config.replan.length > span:
-        raise ConfigError(f"{source}: replan.length: expected a window within the horizon, ≤ tf − t0 = {span:g}, "
-                          f"got {config.replan.length:g}")  # fmt: skip
-    if config.monte_carlo.time_step > span / 2:
-        raise ConfigError(f"{source}: monte_carlo.time_step: expected at most half the horizon ({span / 2:g}), "
-                          f"got {config.monte_carlo.time_step:g}")  # fmt: skip
+    check_horizon(problem, config.replan.length, config.monte_carlo.time_step, str(source), "replan.length",
+                  "monte_carlo.time_step")  # fmt: skip
     return problem
 
 
